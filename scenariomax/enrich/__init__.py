@@ -1,0 +1,1 @@
+"""Scenario enrichment: roadgraph sampling, budgets, SDC paths, controllable labels, light inference."""

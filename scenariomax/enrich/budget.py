@@ -1,0 +1,111 @@
+"""Fitting a scenario into the shard budget without losing what matters.
+
+Objects: the SDC goes to slot 0, the rest are ordered by relevance (closest approach to the SDC
+over the episode) and the least relevant are dropped. Roadgraph: when there are too many points,
+keep those nearest the SDC trajectory (in their original order, so polylines stay contiguous).
+Lights and lanes: nearest the SDC trajectory first.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scenariomax.scenario import Scenario
+from scenariomax.schema import Sizes
+
+_PER_OBJECT = ("object_id", "object_type", "is_sdc", "tracks_to_predict", "objects_of_interest",
+               "difficulty_level", "is_controllable")
+_PER_OBJECT_STEP = ("x", "y", "z", "bbox_yaw", "length", "width", "height", "speed", "vel_yaw",
+                    "velocity_x", "velocity_y", "timestamp_micros", "valid")
+_PER_POINT = ("roadgraph_xyz", "roadgraph_dir", "roadgraph_type", "roadgraph_id", "roadgraph_valid",
+              "roadgraph_speed_limit")
+_PER_LIGHT = ("tl_state", "tl_valid", "tl_lane_id", "tl_x", "tl_y", "tl_z", "tl_inferred")
+_PER_LANE = ("lane_id", "lane_valid", "lane_successors", "lane_predecessors", "lane_left_neighbors",
+             "lane_right_neighbors")
+
+
+def sdc_positions(scenario: Scenario) -> np.ndarray:
+    """Valid (x, y) positions of the SDC over the episode. -> (k, 2)"""
+    sdc = scenario.sdc_index
+    mask = scenario.valid[sdc]
+    return np.stack([scenario.x[sdc, mask], scenario.y[sdc, mask]], axis=1).astype(np.float64)
+
+
+def distance_to_polyline_points(points: np.ndarray, anchors: np.ndarray, chunk: int = 4096) -> np.ndarray:
+    """Minimum distance from each point (m, 2) to a set of anchor points (k, 2). -> (m,)"""
+    if len(anchors) == 0:
+        return np.zeros(len(points))
+    # Thin the anchors: consecutive SDC positions are ~1 m apart, 0.5 m resolution is plenty.
+    out = np.empty(len(points))
+    for start in range(0, len(points), chunk):
+        block = points[start:start + chunk, None, :] - anchors[None, :, :]
+        out[start:start + chunk] = np.sqrt((block ** 2).sum(-1).min(axis=1))
+    return out
+
+
+def object_relevance_order(scenario: Scenario) -> np.ndarray:
+    """Object indices, SDC first, then by closest approach to the SDC (never-present objects last)."""
+    sdc = scenario.sdc_index
+    both = scenario.valid & scenario.valid[sdc][None, :]
+    dist = np.hypot(scenario.x - scenario.x[sdc], scenario.y - scenario.y[sdc])
+    closest = np.where(both, dist, np.inf).min(axis=1)
+    # Objects never valid together with the SDC: rank by distance to any SDC position, after the rest.
+    anchors = sdc_positions(scenario)
+    for index in np.flatnonzero(~np.isfinite(closest)):
+        mask = scenario.valid[index]
+        if mask.any():
+            pts = np.stack([scenario.x[index, mask], scenario.y[index, mask]], axis=1)
+            closest[index] = 1e6 + distance_to_polyline_points(pts, anchors).min()
+        else:
+            closest[index] = 1e12
+    closest[sdc] = -1.0
+    return np.argsort(closest, kind="stable")
+
+
+def _take(scenario: Scenario, names, index: np.ndarray, axis: int = 0) -> dict:
+    return {name: np.take(getattr(scenario, name), index, axis=axis) for name in names}
+
+
+def fit_to_budget(scenario: Scenario, sizes: Sizes) -> Scenario:
+    """SDC in slot 0, objects by relevance, every part cropped to the budget."""
+    changes: dict = {}
+    order = object_relevance_order(scenario)[: sizes.num_objects]
+    if not np.array_equal(order, np.arange(scenario.num_objects)):
+        changes.update(_take(scenario, _PER_OBJECT + _PER_OBJECT_STEP, order))
+        if scenario.agent_path_object_index.size:
+            remap = {int(old): new for new, old in enumerate(order)}
+            kept = [i for i, obj in enumerate(scenario.agent_path_object_index) if int(obj) in remap]
+            changes["agent_path_object_index"] = np.array(
+                [remap[int(scenario.agent_path_object_index[i])] for i in kept], np.int64)
+            for name in ("agent_path_xyz", "agent_path_valid", "agent_path_arc_length"):
+                changes[name] = getattr(scenario, name)[kept]
+    anchors = sdc_positions(scenario)[::5]
+    num_points = scenario.roadgraph_xyz.shape[0]
+    if num_points > sizes.num_roadgraph:
+        dist = distance_to_polyline_points(scenario.roadgraph_xyz[:, :2].astype(np.float64), anchors)
+        dist = np.where(scenario.roadgraph_valid, dist, np.inf)
+        keep = np.sort(np.argpartition(dist, sizes.num_roadgraph - 1)[: sizes.num_roadgraph])
+        changes.update(_take(scenario, _PER_POINT, keep))
+    num_lights = scenario.tl_state.shape[0]
+    if num_lights > sizes.num_lights:
+        pos = np.stack([np.where(scenario.tl_valid, scenario.tl_x, np.nan).astype(np.float64),
+                        np.where(scenario.tl_valid, scenario.tl_y, np.nan)], -1)
+        mean = np.nan_to_num(np.nanmean(pos, axis=1), nan=1e9)
+        keep = np.sort(np.argsort(distance_to_polyline_points(mean, anchors), kind="stable")[: sizes.num_lights])
+        changes.update(_take(scenario, _PER_LIGHT, keep))
+    num_lanes = scenario.lane_id.shape[0]
+    if num_lanes > sizes.num_lanes:
+        rg_ids = changes.get("roadgraph_id", scenario.roadgraph_id)
+        rg_xy = changes.get("roadgraph_xyz", scenario.roadgraph_xyz)[:, :2].astype(np.float64)
+        lane_dist = np.full(num_lanes, np.inf)
+        point_dist = distance_to_polyline_points(rg_xy, anchors)
+        for row, lane in enumerate(scenario.lane_id):
+            mask = rg_ids == lane
+            if mask.any():
+                lane_dist[row] = point_dist[mask].min()
+        keep = np.sort(np.argsort(lane_dist, kind="stable")[: sizes.num_lanes])
+        changes.update(_take(scenario, _PER_LANE, keep))
+    if scenario.lane_successors.shape[1:] and scenario.lane_successors.shape[1] > sizes.num_lane_links:
+        for name in _PER_LANE[2:]:
+            changes[name] = changes.get(name, getattr(scenario, name))[:, : sizes.num_lane_links]
+    return scenario.replace(**changes) if changes else scenario

@@ -1,0 +1,44 @@
+"""What every source dataset module provides to the conversion pipeline.
+
+A source lists *units* of work (usually one raw file each, or a chunk of seeds for the synthetic
+generator) and turns one unit into Scenarios. Units must be picklable strings so worker processes
+(or Ray tasks) can receive them, and `read_unit` must be deterministic so a resumed run reproduces
+the same records.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Iterator, Protocol, Union
+
+
+class InputError(ValueError):
+    """A raw input file is unreadable or malformed. The message is one line naming file and reason."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Failure:
+    """One scenario that could not be converted; recorded in the manifest, the run continues."""
+
+    unit: str  # the input file or unit id
+    scenario: str  # scenario id or position within the unit
+    reason: str  # one line
+
+
+UnitItem = Union["Scenario", Failure]  # noqa: F821 (Scenario imported lazily by sources)
+
+
+class Source(Protocol):
+    """A dataset reader the pipeline can run. Instances must be picklable."""
+
+    name: str  # "synthetic", "womd", ...
+
+    def list_units(self) -> list[str]:
+        """Stable, sorted ids of the units of work."""
+
+    def read_unit(self, unit: str) -> Iterator[UnitItem]:
+        """Yields Scenarios (or Failures for scenarios that could not be built) for one unit.
+        Raises InputError when the whole unit is unreadable."""
+
+    def settings(self) -> dict:
+        """Source settings recorded in the manifest (and compared on --resume)."""
