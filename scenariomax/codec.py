@@ -35,7 +35,13 @@ def _pad_to(array: np.ndarray, shape: tuple[int, ...], pad, key: str) -> np.ndar
     if array.ndim != len(shape):
         raise SchemaError(f"{key}: array has {array.ndim} dims, schema expects {len(shape)}")
     if any(have > want for have, want in zip(array.shape, shape)):
-        raise BudgetError(f"{key}: shape {array.shape} exceeds the budget {shape}")
+        # Slots past the budget that hold only padding may be dropped; real data may not.
+        kept = tuple(slice(0, min(have, want)) for have, want in zip(array.shape, shape))
+        excess = np.ones(array.shape, bool)
+        excess[kept] = False
+        if np.any(array[excess] != pad):
+            raise BudgetError(f"{key}: shape {array.shape} exceeds the budget {shape}")
+        array = array[kept]
     out = np.full(shape, pad, dtype=array.dtype)
     out[tuple(slice(0, n) for n in array.shape)] = array
     return out
@@ -57,12 +63,7 @@ def _field_value(scenario: Scenario, spec: FeatureSpec, sizes: Sizes):
     if spec.field == "path_on_route":
         array = array[:, None]
     shape = spec.resolved_shape(sizes.as_dict())
-    if spec.layout == "time_major":
-        # Slots are on the last axis here.
-        array = _pad_to(array, shape, spec.pad, spec.key)
-    else:
-        array = _pad_to(array, shape, spec.pad, spec.key)
-    return array.astype(spec.numpy_dtype)
+    return _pad_to(array.astype(spec.numpy_dtype), shape, spec.pad, spec.key)
 
 
 def scenario_to_features(scenario: Scenario, sizes: Sizes | None = None) -> dict:

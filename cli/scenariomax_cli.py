@@ -1,0 +1,176 @@
+"""`scenariomax` command line: thin click commands that build a config and call the library."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from scenariomax.schema import Sizes
+
+
+class _OneLineErrors(click.Group):
+    """Bad input ends with one line naming the file and the problem, never a traceback."""
+
+    def invoke(self, ctx):
+        from scenariomax.codec import SchemaError
+        from scenariomax.io.tfrecord import RecordError
+        from scenariomax.pipeline import ConversionError
+        from scenariomax.shards import ShardReadError
+        from scenariomax.sources.base import InputError
+
+        try:
+            return super().invoke(ctx)
+        except (ConversionError, InputError, RecordError, ShardReadError, SchemaError, FileNotFoundError,
+                NotADirectoryError, PermissionError) as error:
+            raise click.ClickException(str(error).splitlines()[0] if str(error) else type(error).__name__)
+
+
+@click.group(cls=_OneLineErrors)
+@click.version_option(package_name="vmax")
+def main() -> None:
+    """Convert driving datasets into V-Max shards, inspect and validate them."""
+
+
+def _sizes(num_objects: int, roadgraph_points: int) -> Sizes:
+    return Sizes(num_objects=num_objects, num_roadgraph=roadgraph_points)
+
+
+def _print_summary(result) -> None:
+    width = max(len(label) for label, _ in result.summary_rows())
+    click.echo("")
+    for label, value in result.summary_rows():
+        click.echo(f"  {label:<{width}}  {value}")
+    for failure in result.failures[:10]:
+        click.echo(f"  failed: {failure['unit']} [{failure['scenario']}]: {failure['reason']}", err=True)
+    if len(result.failures) > 10:
+        click.echo(f"  ... and {len(result.failures) - 10} more failures (see manifest.json)", err=True)
+
+
+def _run_conversion(source, out, workers, shard_size, resume, split, engine, address, sizes, enrich, num_paths,
+                    points_per_path) -> None:
+    from scenariomax.enrich.transform import make_transform
+    from scenariomax.pipeline import ConvertSettings, convert
+
+    transform, transform_settings = make_transform(enabled=enrich, num_paths=num_paths,
+                                                   points_per_path=points_per_path)
+    settings = ConvertSettings(
+        out=Path(out), split=split, shard_size=shard_size, workers=workers, resume=resume, sizes=sizes,
+        engine=engine, ray_address=address, progress=sys.stderr.isatty() or True,
+        transform=transform, transform_settings=transform_settings,
+    )
+    result = convert(source, settings)
+    _print_summary(result)
+    if not result.ok:
+        sys.exit(1)
+
+
+_common_pipeline_options = [
+    click.option("--out", required=True, type=click.Path(file_okay=False), help="Output directory."),
+    click.option("--workers", type=int, default=None, help="Worker processes (default: one per core)."),
+    click.option("--shard-size", type=int, default=1000, show_default=True, help="Scenarios per shard."),
+    click.option("--resume", is_flag=True, help="Continue an interrupted conversion in --out."),
+    click.option("--split", default="train", show_default=True, help="Split name used in shard file names."),
+    click.option("--engine", type=click.Choice(["process", "ray"]), default="process", show_default=True),
+    click.option("--address", default=None, help="Ray cluster address (with --engine ray)."),
+    click.option("--num-paths", type=int, default=10, show_default=True, help="SDC paths per scenario."),
+    click.option("--points-per-path", type=int, default=300, show_default=True, help="Points per SDC path."),
+]
+
+
+def _pipeline_options(fn):
+    for option in reversed(_common_pipeline_options):
+        fn = option(fn)
+    return fn
+
+
+@main.command()
+@click.option("--dataset", type=click.Choice(["synthetic", "womd", "nuplan", "av2", "scenarionet"]),
+              default="synthetic", show_default=True)
+@click.option("--src", default=None, help="Raw input files, directory or glob (real datasets).")
+@click.option("--maps", default=None, help="nuPlan maps root.")
+@click.option("--num-scenarios", type=int, default=100, show_default=True, help="Synthetic: how many.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Synthetic: random seed.")
+@click.option("--stride-steps", type=int, default=None, help="nuPlan: also cut a scenario every N steps.")
+@click.option("--num-objects", type=int, default=128, show_default=True, help="Object slots per scenario.")
+@click.option("--roadgraph-points", type=int, default=30000, show_default=True, help="Roadgraph points.")
+@click.option("--no-enrich", is_flag=True, help="Skip enrichment (paths, controllable labels, lights).")
+@_pipeline_options
+def convert(dataset, src, maps, num_scenarios, seed, stride_steps, num_objects, roadgraph_points, no_enrich,
+            out, workers, shard_size, resume, split, engine, address, num_paths, points_per_path):
+    """Convert a dataset (or generate synthetic scenarios) into shards + manifest.json."""
+    from scenariomax.sources.registry import make_source
+
+    sizes = Sizes(num_objects=num_objects, num_roadgraph=roadgraph_points, num_paths=num_paths,
+                  num_points_per_path=points_per_path)
+    source = make_source(dataset, src=src, sizes=sizes, num_scenarios=num_scenarios, seed=seed, maps=maps,
+                         stride_steps=stride_steps)
+    _run_conversion(source, out, workers, shard_size, resume, split, engine, address, sizes, not no_enrich,
+                    num_paths, points_per_path)
+
+
+@main.command("build-sdc-paths")
+@click.argument("src")
+@_pipeline_options
+def build_sdc_paths(src, out, workers, shard_size, resume, split, engine, address, num_paths, points_per_path):
+    """Enrich existing shards or raw WOMD tf.Example files with SDC paths (and the other enrichments)."""
+    from scenariomax.sources.shard_records import ShardRecordsSource
+
+    sizes = Sizes(num_paths=num_paths, num_points_per_path=points_per_path)
+    _run_conversion(ShardRecordsSource(src=src), out, workers, shard_size, resume, split, engine, address, sizes,
+                    True, num_paths, points_per_path)
+
+
+@main.command()
+@click.argument("path")
+@click.option("--json", "as_json", is_flag=True, help="Print the statistics as JSON.")
+@click.option("--render", type=click.Path(dir_okay=False), default=None, help="Draw one scenario to this PNG.")
+@click.option("--scenario", "scenario_id", default=None, help="Scenario id to show/draw (default: the first).")
+@click.option("--max-records", type=int, default=None, help="Only look at the first N records.")
+def inspect(path, as_json, render, scenario_id, max_records):
+    """Statistics, schema validation and pictures of shards."""
+    from scenariomax.inspect import format_report, inspect_shards
+
+    stats = inspect_shards(path, scenario_id=scenario_id, max_records=max_records)
+    click.echo(json.dumps(stats, indent=1) if as_json else format_report(stats))
+    if render:
+        from scenariomax.render import render_scenario
+        from scenariomax.shards import read_shards
+
+        scenario = next((s for s in read_shards(path) if scenario_id in (None, s.scenario_id)), None)
+        if scenario is None:
+            raise click.ClickException(f"{path}: no scenario with id {scenario_id!r}")
+        written = render_scenario(scenario, render)
+        click.echo(f"rendered {scenario.scenario_id} -> {written}", err=True)
+
+
+@main.command()
+@click.argument("path")
+def validate(path):
+    """Exit 0 if every record matches the schema; else one line per bad record and exit 1."""
+    from scenariomax.validate import validate_shards
+
+    report = validate_shards(path)
+    for file, index, scenario_id, reason in report.bad:
+        where = f"{file}: record {index}" if index is not None and index >= 0 else f"{file}"
+        click.echo(f"{where}{f' ({scenario_id})' if scenario_id else ''}: {reason}")
+    click.echo(f"{report.num_records} records in {report.num_files} files: "
+               f"{'all valid' if not report.bad else f'{len(report.bad)} problems'}", err=True)
+    sys.exit(1 if report.bad else 0)
+
+
+@main.command("schema-doc")
+@click.option("--out", type=click.Path(dir_okay=False), default="docs/schema.md", show_default=True)
+def schema_doc(out):
+    """Regenerate the schema documentation from schemas/."""
+    from scenariomax.schema_doc import render_schema_markdown
+
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    Path(out).write_text(render_schema_markdown())
+    click.echo(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,179 @@
+"""The lane graph (successors, predecessors, left/right neighbours) of a scenario.
+
+Explicit links from the source are used when the scenario has them (`lane_id` with any link).
+Otherwise (raw WOMD tf.Example: points only) the graph is rebuilt from the lane polylines:
+- successor: a lane's last point lies within `successor_gap_m` (1.5 m) of another lane's first
+  point and the headings there differ by less than `max_heading_deg` (45 deg);
+- neighbour: sample points every ~2 m along a lane; another lane is a neighbour when at least
+  `min_neighbor_samples` samples (or all, for short lanes) see it `neighbor_min_m`..`neighbor_max_m`
+  (2-5 m) away laterally with headings within `neighbor_heading_deg` (30 deg), and no road edge
+  passes within 0.5 m of the midpoint between them. Left/right is the majority side.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from scenariomax import schema as sch
+from scenariomax.enrich.lanes import Lanes
+from scenariomax.enrich.roadgraph import LaneLinks, lane_graph_arrays
+from scenariomax.scenario import Scenario
+
+
+@dataclasses.dataclass(frozen=True)
+class LaneGraphSettings:
+    successor_gap_m: float = 1.5
+    max_heading_deg: float = 45.0
+    neighbor_min_m: float = 2.0
+    neighbor_max_m: float = 5.0
+    neighbor_heading_deg: float = 30.0
+    neighbor_sample_spacing_m: float = 2.0
+    min_neighbor_samples: int = 3
+    edge_clearance_m: float = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class LaneGraph:
+    """Links between lane *indices* of a `Lanes` object (each a tuple of indices per lane)."""
+
+    successors: tuple[tuple[int, ...], ...]
+    predecessors: tuple[tuple[int, ...], ...]
+    left: tuple[tuple[int, ...], ...]
+    right: tuple[tuple[int, ...], ...]
+
+
+def _as_tuples(pairs: np.ndarray, num_lanes: int) -> tuple[tuple[int, ...], ...]:
+    table: list[list[int]] = [[] for _ in range(num_lanes)]
+    for a, b in pairs:
+        if b not in table[a]:
+            table[a].append(int(b))
+    return tuple(tuple(row) for row in table)
+
+
+def has_explicit_links(scenario: Scenario) -> bool:
+    links = (scenario.lane_successors, scenario.lane_predecessors, scenario.lane_left_neighbors,
+             scenario.lane_right_neighbors)
+    return bool(scenario.lane_valid.any() and any(table.size and (table >= 0).any() for table in links))
+
+
+def graph_from_scenario_links(scenario: Scenario, lanes: Lanes) -> LaneGraph:
+    """The source's explicit lane links, mapped onto lane indices (links to absent lanes dropped)."""
+    index_of = lanes.index_of
+    tables = {}
+    for name in ("lane_successors", "lane_predecessors", "lane_left_neighbors", "lane_right_neighbors"):
+        pairs = []
+        for row, lane_id in enumerate(scenario.lane_id):
+            if not scenario.lane_valid[row] or int(lane_id) not in index_of:
+                continue
+            for other in getattr(scenario, name)[row]:
+                if other >= 0 and int(other) in index_of:
+                    pairs.append((index_of[int(lane_id)], index_of[int(other)]))
+        tables[name] = _as_tuples(np.array(pairs, np.int64).reshape(-1, 2), lanes.num_lanes)
+    return LaneGraph(tables["lane_successors"], tables["lane_predecessors"],
+                     tables["lane_left_neighbors"], tables["lane_right_neighbors"])
+
+
+def _successor_pairs(lanes: Lanes, settings: LaneGraphSettings) -> np.ndarray:
+    first = lanes.offsets[:-1]
+    last = lanes.offsets[1:] - 1
+    starts, ends = lanes.points[first, :2], lanes.points[last, :2]
+    start_dir, end_dir = lanes.point_tangent[first], lanes.point_tangent[last]
+    hits = cKDTree(starts).query_ball_point(ends, r=settings.successor_gap_m)
+    pairs = np.array([(a, b) for a, row in enumerate(hits) for b in row if a != b], np.int64).reshape(-1, 2)
+    if len(pairs) == 0:
+        return pairs
+    aligned = (end_dir[pairs[:, 0]] * start_dir[pairs[:, 1]]).sum(-1) > np.cos(np.radians(settings.max_heading_deg))
+    return pairs[aligned]
+
+
+def _neighbor_pairs(lanes: Lanes, edge_xy: np.ndarray, settings: LaneGraphSettings) -> tuple[np.ndarray, np.ndarray]:
+    """(left pairs, right pairs) as (lane, neighbour) index rows."""
+    stride_points = []
+    for k in range(lanes.num_lanes):
+        cum = lanes.cumulative[k]
+        # One sample every `spacing` metres along the lane (indices of its points).
+        marks = np.searchsorted(cum, np.arange(0.0, cum[-1] + 1e-9, settings.neighbor_sample_spacing_m))
+        stride_points.append(lanes.offsets[k] + np.unique(np.minimum(marks, len(cum) - 1)))
+    samples = np.concatenate(stride_points)
+    sample_lane = lanes.point_lane[samples]
+    sample_xy = lanes.points[samples, :2]
+    sample_dir = lanes.point_tangent[samples]
+    # Coarse index over the samples themselves (every 2 m): few candidates per query.
+    tree = cKDTree(sample_xy)
+    num_neighbors = min(32, len(samples))
+    dist, idx = tree.query(sample_xy, k=num_neighbors, distance_upper_bound=settings.neighbor_max_m + 1.0)
+    dist, idx = np.atleast_2d(dist), np.atleast_2d(idx)
+    rows, cols = np.nonzero(np.isfinite(dist))
+    other = idx[rows, cols]
+    keep = sample_lane[other] != sample_lane[rows]
+    rows, other = rows[keep], other[keep]
+    # Exact lateral distance to the other lane: project onto the other sample's tangent line.
+    offset = sample_xy[other] - sample_xy[rows]
+    lateral = np.abs(offset[:, 0] * sample_dir[other, 1] - offset[:, 1] * sample_dir[other, 0])
+    along = np.abs((offset * sample_dir[other]).sum(-1))
+    cos_heading = (sample_dir[rows] * sample_dir[other]).sum(-1)
+    ok = ((lateral >= settings.neighbor_min_m) & (lateral <= settings.neighbor_max_m)
+          & (along <= settings.neighbor_sample_spacing_m) & (cos_heading > np.cos(np.radians(settings.neighbor_heading_deg))))
+    rows, other, offset = rows[ok], other[ok], offset[ok]
+    if len(edge_xy) and len(rows):
+        midpoints = sample_xy[rows] + 0.5 * offset
+        clearance, _ = cKDTree(edge_xy).query(midpoints, k=1)
+        clear = clearance > settings.edge_clearance_m
+        rows, other, offset = rows[clear], other[clear], offset[clear]
+    side = np.sign(sample_dir[rows, 0] * offset[:, 1] - sample_dir[rows, 1] * offset[:, 0])  # + left
+    lane_a, lane_b = sample_lane[rows], sample_lane[other]
+    # One vote per (sample, neighbour lane): a sample may see several points of the same lane.
+    key = np.unique(np.stack([rows, lane_b], 1), axis=0, return_index=True)[1]
+    lane_a, lane_b, side, rows = lane_a[key], lane_b[key], side[key], rows[key]
+    pair_keys, inverse, counts = np.unique(np.stack([lane_a, lane_b], 1), axis=0, return_inverse=True,
+                                           return_counts=True)
+    inverse = inverse.reshape(-1)
+    side_votes = np.zeros(len(pair_keys))
+    np.add.at(side_votes, inverse, side)
+    samples_per_lane = np.array([len(s) for s in stride_points])
+    needed = np.minimum(settings.min_neighbor_samples, samples_per_lane[pair_keys[:, 0]]) if len(pair_keys) else []
+    enough = counts >= needed
+    left = pair_keys[enough & (side_votes > 0)]
+    right = pair_keys[enough & (side_votes < 0)]
+    return left.reshape(-1, 2), right.reshape(-1, 2)
+
+
+def rebuild_lane_graph(lanes: Lanes, edge_xy: np.ndarray | None = None,
+                       settings: LaneGraphSettings = LaneGraphSettings()) -> LaneGraph:
+    """Lane graph inferred from lane geometry alone (see the module docstring for the rules)."""
+    num = lanes.num_lanes
+    if num == 0:
+        return LaneGraph((), (), (), ())
+    succ = _successor_pairs(lanes, settings)
+    edge_xy = np.zeros((0, 2)) if edge_xy is None else np.asarray(edge_xy, np.float64)[:, :2]
+    left, right = _neighbor_pairs(lanes, edge_xy, settings) if num > 1 else (np.zeros((0, 2), np.int64),) * 2
+    return LaneGraph(_as_tuples(succ, num), _as_tuples(succ[:, ::-1], num), _as_tuples(left, num),
+                     _as_tuples(right, num))
+
+
+def road_edge_points(scenario: Scenario) -> np.ndarray:
+    mask = np.isin(scenario.roadgraph_type, sch.ROAD_EDGE_TYPES) & scenario.roadgraph_valid
+    return scenario.roadgraph_xyz[mask, :2].astype(np.float64)
+
+
+def scenario_lane_graph(scenario: Scenario, lanes: Lanes,
+                        settings: LaneGraphSettings = LaneGraphSettings()) -> tuple[LaneGraph, bool]:
+    """(graph, rebuilt): the source's links when present, else a graph rebuilt from geometry."""
+    if has_explicit_links(scenario):
+        return graph_from_scenario_links(scenario, lanes), False
+    return rebuild_lane_graph(lanes, road_edge_points(scenario), settings), True
+
+
+def lane_graph_to_arrays(lanes: Lanes, graph: LaneGraph, num_lane_links: int = 8) -> dict:
+    """Scenario lane_* arrays (ids, not indices), as `enrich.roadgraph.lane_graph_arrays` returns."""
+    ids = lanes.ids
+    links = [LaneLinks(lane_id=int(ids[k]),
+                       successors=[int(ids[j]) for j in graph.successors[k]],
+                       predecessors=[int(ids[j]) for j in graph.predecessors[k]],
+                       left_neighbors=[int(ids[j]) for j in graph.left[k]],
+                       right_neighbors=[int(ids[j]) for j in graph.right[k]])
+             for k in range(lanes.num_lanes)]
+    return lane_graph_arrays(links, num_lane_links)

@@ -1,0 +1,89 @@
+"""Lane centrelines pulled out of a scenario's roadgraph, with a spatial index over their points."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from scenariomax import schema as sch
+from scenariomax.enrich.geometry import arc_lengths, polyline_runs, tangents
+from scenariomax.scenario import Scenario
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Lanes:
+    """K lane centrelines stored back to back; lane k owns points[offsets[k]:offsets[k + 1]]."""
+
+    ids: np.ndarray  # (K,) int64, roadgraph ids
+    types: np.ndarray  # (K,) int64, enum roadgraph_type
+    offsets: np.ndarray  # (K + 1,) int64
+    points: np.ndarray  # (P, 3) float64
+
+    @property
+    def num_lanes(self) -> int:
+        return int(self.ids.shape[0])
+
+    def polyline(self, lane: int) -> np.ndarray:
+        """Points of lane index `lane`. -> (n, 3)"""
+        return self.points[self.offsets[lane]:self.offsets[lane + 1]]
+
+    @functools.cached_property
+    def cumulative(self) -> tuple[np.ndarray, ...]:
+        """Arc length along each lane at each of its points."""
+        return tuple(arc_lengths(self.polyline(k)) for k in range(self.num_lanes))
+
+    @functools.cached_property
+    def lengths(self) -> np.ndarray:  # (K,) float64
+        return np.array([c[-1] if c.size else 0.0 for c in self.cumulative])
+
+    @functools.cached_property
+    def point_lane(self) -> np.ndarray:  # (P,) int64, lane index of each point
+        return np.repeat(np.arange(self.num_lanes), np.diff(self.offsets))
+
+    @functools.cached_property
+    def point_tangent(self) -> np.ndarray:  # (P, 2) unit direction of travel at each point
+        if self.num_lanes == 0:
+            return np.zeros((0, 2))
+        return np.vstack([tangents(self.polyline(k)) for k in range(self.num_lanes)])
+
+    @functools.cached_property
+    def tree(self) -> cKDTree:
+        return cKDTree(self.points[:, :2] if len(self.points) else np.zeros((0, 2)))
+
+    @functools.cached_property
+    def index_of(self) -> dict[int, int]:
+        return {int(lane_id): k for k, lane_id in enumerate(self.ids)}
+
+
+def extract_lanes(scenario: Scenario) -> Lanes:
+    """Lane polylines (types freeway, surface street, bike) from the roadgraph. When a lane id has
+    several runs (e.g. after a budget crop) the longest one is kept; single-point lanes are dropped."""
+    is_lane = np.isin(scenario.roadgraph_type, sch.LANE_TYPES) & scenario.roadgraph_valid
+    runs = polyline_runs(scenario.roadgraph_id, is_lane)
+    best: dict[int, tuple[int, int]] = {}
+    for start, stop in runs:
+        lane_id = int(scenario.roadgraph_id[start])
+        if stop - start >= 2 and (lane_id not in best or stop - start > best[lane_id][1] - best[lane_id][0]):
+            best[lane_id] = (int(start), int(stop))
+    chosen = sorted(best.values())  # roadgraph order: deterministic
+    xyz = scenario.roadgraph_xyz.astype(np.float64)
+    points = [xyz[a:b] for a, b in chosen]
+    sizes = [b - a for a, b in chosen]
+    return Lanes(
+        ids=np.array([scenario.roadgraph_id[a] for a, _ in chosen], np.int64),
+        types=np.array([scenario.roadgraph_type[a] for a, _ in chosen], np.int64),
+        offsets=np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+        points=np.vstack(points) if points else np.zeros((0, 3)),
+    )
+
+
+def nearest_lane_points(lanes: Lanes, xy: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Distance to and index of the nearest lane point within `radius` (inf / -1 when none). -> (m,), (m,)"""
+    if len(lanes.points) == 0 or len(xy) == 0:
+        return np.full(len(xy), np.inf), np.full(len(xy), -1, np.int64)
+    dist, index = lanes.tree.query(np.asarray(xy, np.float64)[:, :2], k=1, distance_upper_bound=radius)
+    index = np.where(np.isfinite(dist), index, -1)
+    return dist, index.astype(np.int64)

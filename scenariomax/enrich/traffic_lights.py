@@ -1,0 +1,112 @@
+"""Traffic-light states inferred from vehicle motion where the log has none.
+
+For each light slot with a controlled lane and a stop point, entries whose state is unknown (not
+valid, or state 0) get evidence from vehicles travelling along that lane near its stop point
+(lateral offset <= `lane_halfwidth_m`, heading within 45 deg of the lane):
+- green (GO): a vehicle crosses the stop point at step t -> GO for steps t-`green_window`..t+`green_window`;
+- red (STOP): a vehicle stands (speed < `stopped_speed_mps`) within `queue_distance_m` before the
+  stop point while cross traffic flows (a vehicle within `cross_radius_m` of the stop point moving
+  faster than `cross_speed_mps` roughly perpendicular to the lane).
+Steps with both kinds of evidence stay unknown; gaps of at most `max_gap_steps` between equal
+evidence are filled. Inferred entries are marked in `tl_inferred`; logged known states are never
+changed and lights without evidence stay unknown.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from scenariomax import schema as sch
+from scenariomax.enrich.geometry import project_to_polyline, tangents
+from scenariomax.enrich.lanes import Lanes
+from scenariomax.scenario import Scenario
+
+
+@dataclasses.dataclass(frozen=True)
+class LightSettings:
+    lane_halfwidth_m: float = 2.0
+    queue_distance_m: float = 10.0
+    stopped_speed_mps: float = 0.5
+    cross_radius_m: float = 30.0
+    cross_speed_mps: float = 2.0
+    green_window: int = 5
+    max_gap_steps: int = 10
+
+
+def _stop_pose(scenario: Scenario, light: int, lanes: Lanes) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """Stop point (3,), lane direction there (2,), controlled lane id; None when unknown."""
+    has_lane = scenario.tl_lane_id[light] >= 0
+    if not has_lane.any():
+        return None
+    step = int(np.argmax(has_lane & scenario.tl_valid[light])) if (has_lane & scenario.tl_valid[light]).any() \
+        else int(np.argmax(has_lane))
+    lane_id = int(scenario.tl_lane_id[light, step])
+    stop = np.array([scenario.tl_x[light, step], scenario.tl_y[light, step], scenario.tl_z[light, step]], np.float64)
+    lane = lanes.index_of.get(lane_id)
+    if lane is None:
+        return None
+    line = lanes.polyline(lane)
+    _, arc, _ = project_to_polyline(stop[None, :2], line)
+    k = int(np.clip(np.searchsorted(lanes.cumulative[lane], arc[0]) - 1, 0, len(line) - 1))
+    return stop, tangents(line)[k], lane_id
+
+
+def _fill_gaps(evidence: np.ndarray, max_gap: int) -> np.ndarray:
+    """Fills runs of False of length <= max_gap that lie between two True entries. (T,) -> (T,)"""
+    out = evidence.copy()
+    idx = np.flatnonzero(evidence)
+    for a, b in zip(idx[:-1], idx[1:]):
+        if 1 < b - a <= max_gap + 1:
+            out[a:b] = True
+    return out
+
+
+def light_evidence(scenario: Scenario, stop: np.ndarray, direction: np.ndarray,
+                   settings: LightSettings = LightSettings()) -> tuple[np.ndarray, np.ndarray]:
+    """(green (T,) bool, red (T,) bool) evidence for a stop point and lane direction."""
+    vehicles = scenario.object_type == sch.OBJECT_TYPE_VEHICLE
+    valid = scenario.valid & vehicles[:, None]  # (N, T)
+    rel_x, rel_y = scenario.x - stop[0], scenario.y - stop[1]
+    along = rel_x * direction[0] + rel_y * direction[1]  # (N, T), > 0 past the stop point
+    lateral = np.abs(rel_x * direction[1] - rel_y * direction[0])
+    heading_cos = np.cos(scenario.bbox_yaw) * direction[0] + np.sin(scenario.bbox_yaw) * direction[1]
+    on_lane = valid & (lateral <= settings.lane_halfwidth_m) & (heading_cos > np.cos(np.pi / 4))
+    num_steps = scenario.num_timesteps
+    crossed = on_lane[:, 1:] & on_lane[:, :-1] & (along[:, :-1] < 0) & (along[:, 1:] >= 0)  # (N, T-1)
+    green = np.zeros(num_steps, bool)
+    for step in np.flatnonzero(crossed.any(axis=0)) + 1:
+        green[max(step - settings.green_window, 0):step + settings.green_window + 1] = True
+    speed = np.hypot(scenario.velocity_x, scenario.velocity_y)
+    queued = (on_lane & (along < 0) & (along >= -settings.queue_distance_m) & (speed < settings.stopped_speed_mps)).any(0)
+    dist = np.hypot(rel_x, rel_y)
+    crossing = valid & (dist <= settings.cross_radius_m) & (speed > settings.cross_speed_mps) & (np.abs(heading_cos) < 0.5)
+    red = queued & crossing.any(axis=0)
+    green, red = _fill_gaps(green, settings.max_gap_steps), _fill_gaps(red, settings.max_gap_steps)
+    conflict = green & red
+    return green & ~conflict, red & ~conflict
+
+
+def with_inferred_lights(scenario: Scenario, lanes: Lanes, settings: LightSettings = LightSettings()) -> Scenario:
+    """The scenario with unknown light states filled from vehicle motion where there is evidence."""
+    num_lights = scenario.tl_state.shape[0]
+    if num_lights == 0:
+        return scenario
+    state, valid, inferred = scenario.tl_state.copy(), scenario.tl_valid.copy(), scenario.tl_inferred.copy()
+    lane_id = scenario.tl_lane_id.copy()
+    xs, ys, zs = scenario.tl_x.copy(), scenario.tl_y.copy(), scenario.tl_z.copy()
+    for light in range(num_lights):
+        pose = _stop_pose(scenario, light, lanes)
+        if pose is None:
+            continue
+        stop, direction, controlled = pose
+        unknown = ~(valid[light] & (state[light] != sch.TL_UNKNOWN))
+        green, red = light_evidence(scenario, stop, direction, settings)
+        for evidence, value in ((green, sch.TL_GO), (red, sch.TL_STOP)):
+            fill = evidence & unknown
+            state[light, fill], valid[light, fill], inferred[light, fill] = value, True, True
+            lane_id[light, fill] = controlled
+            xs[light, fill], ys[light, fill], zs[light, fill] = stop
+    return scenario.replace(tl_state=state, tl_valid=valid, tl_inferred=inferred, tl_lane_id=lane_id,
+                            tl_x=xs, tl_y=ys, tl_z=zs)

@@ -1,0 +1,58 @@
+"""Who is on the road: body sizes and driver traits drawn from an rng."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from scenariomax.schema import OBJECT_TYPE_CYCLIST, OBJECT_TYPE_PEDESTRIAN, OBJECT_TYPE_VEHICLE
+
+
+@dataclasses.dataclass(frozen=True)
+class Body:
+    object_type: int  # enum object_type
+    length: float  # metres
+    width: float
+    height: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Driver:
+    speed_factor: float  # desired speed / speed limit
+    max_accel: float  # m/s^2 (IDM a)
+    comfort_decel: float  # m/s^2 (IDM b)
+    time_headway: float  # s (IDM T)
+
+
+def vehicle_body(rng: np.random.Generator, allow_trucks: bool = True) -> Body:
+    if allow_trucks and rng.random() < 0.08:
+        return Body(OBJECT_TYPE_VEHICLE, float(rng.uniform(6.0, 8.0)), float(rng.uniform(2.3, 2.5)),
+                    float(rng.uniform(2.8, 3.5)))
+    return Body(OBJECT_TYPE_VEHICLE, float(np.clip(rng.normal(4.6, 0.3), 3.9, 5.2)),
+                float(rng.uniform(1.8, 2.1)), float(rng.uniform(1.45, 1.8)))
+
+
+def parked_body(rng: np.random.Generator) -> Body:
+    return Body(OBJECT_TYPE_VEHICLE, float(np.clip(rng.normal(4.5, 0.3), 3.8, 5.0)),
+                float(rng.uniform(1.75, 2.0)), float(rng.uniform(1.45, 1.8)))
+
+
+def cyclist_body(rng: np.random.Generator) -> Body:
+    return Body(OBJECT_TYPE_CYCLIST, float(rng.uniform(1.7, 1.9)), float(rng.uniform(0.6, 0.8)),
+                float(rng.uniform(1.6, 1.9)))
+
+
+def pedestrian_body(rng: np.random.Generator) -> Body:
+    return Body(OBJECT_TYPE_PEDESTRIAN, float(rng.uniform(0.5, 0.7)), float(rng.uniform(0.5, 0.7)),
+                float(rng.uniform(1.5, 1.9)))
+
+
+def vehicle_driver(rng: np.random.Generator) -> Driver:
+    return Driver(float(rng.uniform(0.85, 1.1)), float(rng.uniform(1.5, 2.5)), float(rng.uniform(1.8, 2.6)),
+                  float(rng.uniform(1.0, 1.8)))
+
+
+def cyclist_driver(rng: np.random.Generator, speed_limit: float) -> Driver:
+    # Cyclists ride at 4-6.5 m/s whatever the limit: express that as a factor of the limit.
+    return Driver(float(rng.uniform(4.0, 6.5)) / max(speed_limit, 1.0), 1.0, 1.5, 1.0)

@@ -1,0 +1,209 @@
+"""WOMD `Scenario` proto -> `Scenario`s (one per 91-step window).
+
+Coordinates stay global (as the dataset gives them). Invalid states are filled with -1.
+Map features become `MapPolyline`s (lane centrelines in driving direction, road edges oriented
+with the road on their left) and `LaneLinks`; traffic-light lane states become (L, T) arrays.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+from google.protobuf.message import DecodeError
+
+from scenariomax import schema as sch
+from scenariomax.enrich.budget import fit_to_budget
+from scenariomax.enrich.roadgraph import LaneLinks, MapPolyline, lane_graph_arrays, polylines_to_roadgraph
+from scenariomax.scenario import Scenario
+from scenariomax.schema import Sizes
+from scenariomax.sources.womd import proto
+from scenariomax.sources.womd.edges import orient_road_edges
+from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, window_starts, wrap_angle
+
+MPH_TO_MPS = 0.44704
+SOURCE_NAME = "womd"
+
+# WOMD LaneCenter.type -> roadgraph type. Undefined lanes are still drivable lanes: surface street.
+LANE_TYPES = {proto.LANE_TYPE_UNDEFINED: sch.RG_LANE_SURFACE_STREET, proto.LANE_TYPE_FREEWAY: sch.RG_LANE_FREEWAY,
+              proto.LANE_TYPE_SURFACE_STREET: sch.RG_LANE_SURFACE_STREET, proto.LANE_TYPE_BIKE: sch.RG_LANE_BIKE}
+# WOMD RoadLine.type 1..8 -> roadgraph types 6..13 (same order); unknown (0) stays unknown (0).
+ROAD_LINE_TYPES = {0: 0, **{k: k + 5 for k in range(1, 9)}}
+# WOMD RoadEdge.type -> roadgraph type; an unknown edge is treated as a boundary.
+ROAD_EDGE_TYPES = {proto.ROAD_EDGE_UNKNOWN: sch.RG_ROAD_EDGE_BOUNDARY, proto.ROAD_EDGE_BOUNDARY: sch.RG_ROAD_EDGE_BOUNDARY,
+                   proto.ROAD_EDGE_MEDIAN: sch.RG_ROAD_EDGE_MEDIAN}
+KNOWN_OBJECT_TYPES = (sch.OBJECT_TYPE_VEHICLE, sch.OBJECT_TYPE_PEDESTRIAN, sch.OBJECT_TYPE_CYCLIST, sch.OBJECT_TYPE_OTHER)
+_STATE_FIELDS = ("center_x", "center_y", "center_z", "length", "width", "height", "heading", "velocity_x", "velocity_y")
+
+
+class ScenarioBuildError(ValueError):
+    """One scenario (or window) cannot be built; the message is one line."""
+
+
+def parse_scenario(data: bytes) -> proto.ScenarioProto:
+    message = proto.ScenarioProto()
+    try:
+        message.ParseFromString(data)
+    except (DecodeError, RuntimeError, ValueError) as error:
+        raise ScenarioBuildError(f"not a WOMD Scenario message ({error})") from None
+    return message
+
+
+# --- tracks --------------------------------------------------------------------------------------
+def track_arrays(message) -> dict[str, np.ndarray]:
+    """Per-track state arrays over the whole log: (N, T) float64 for each state field, (N, T) bool valid."""
+    num_steps = len(message.timestamps_seconds) or max((len(t.states) for t in message.tracks), default=0)
+    num_tracks = len(message.tracks)
+    values = np.full((len(_STATE_FIELDS), num_tracks, num_steps), -1.0)
+    valid = np.zeros((num_tracks, num_steps), bool)
+    for row, track in enumerate(message.tracks):
+        if len(track.states) != num_steps:
+            raise ScenarioBuildError(f"track {track.id} has {len(track.states)} states, expected {num_steps}")
+        for step, state in enumerate(track.states):
+            if state.valid:
+                valid[row, step] = True
+                values[:, row, step] = [getattr(state, name) for name in _STATE_FIELDS]
+    out = dict(zip(_STATE_FIELDS, values))
+    out["valid"] = valid
+    return out
+
+
+# --- map -----------------------------------------------------------------------------------------
+def _points(points) -> np.ndarray:
+    return np.array([(p.x, p.y, p.z) for p in points], np.float64).reshape(-1, 3)
+
+
+def map_polylines(message) -> tuple[list[MapPolyline], list[LaneLinks]]:
+    """Map features -> polylines (road edges oriented, road on the left) and lane links."""
+    polylines: list[MapPolyline] = []
+    links: list[LaneLinks] = []
+    for feature in message.map_features:
+        kind = feature.WhichOneof("feature_data")
+        fid = int(feature.id)
+        if kind == "lane":
+            lane = feature.lane
+            limit = lane.speed_limit_mph * MPH_TO_MPS if lane.speed_limit_mph > 0 else -1.0
+            polylines.append(MapPolyline(fid, LANE_TYPES.get(lane.type, sch.RG_LANE_SURFACE_STREET),
+                                         _points(lane.polyline), speed_limit=float(limit)))
+            links.append(LaneLinks(fid, successors=list(lane.exit_lanes), predecessors=list(lane.entry_lanes),
+                                   left_neighbors=[n.feature_id for n in lane.left_neighbors],
+                                   right_neighbors=[n.feature_id for n in lane.right_neighbors]))
+        elif kind == "road_line":
+            polylines.append(MapPolyline(fid, ROAD_LINE_TYPES.get(feature.road_line.type, 0),
+                                         _points(feature.road_line.polyline)))
+        elif kind == "road_edge":
+            polylines.append(MapPolyline(fid, ROAD_EDGE_TYPES.get(feature.road_edge.type, sch.RG_ROAD_EDGE_BOUNDARY),
+                                         _points(feature.road_edge.polyline)))
+        elif kind == "stop_sign":
+            polylines.append(MapPolyline(fid, sch.RG_STOP_SIGN, _points([feature.stop_sign.position])))
+        elif kind in ("crosswalk", "speed_bump", "driveway"):
+            rg_type = {"crosswalk": sch.RG_CROSSWALK, "speed_bump": sch.RG_SPEED_BUMP, "driveway": sch.RG_DRIVEWAY}[kind]
+            polylines.append(MapPolyline(fid, rg_type, _points(getattr(feature, kind).polygon), closed=True))
+    polylines = [p for p in polylines if len(p.xyz)]
+    return orient_road_edges(polylines, sch.ROAD_EDGE_TYPES, sch.LANE_TYPES), links
+
+
+# --- traffic lights ------------------------------------------------------------------------------
+def traffic_light_arrays(message, start: int, num_timesteps: int) -> dict[str, np.ndarray]:
+    """(L, T) light arrays for one window, one row per controlled lane (sorted by lane id)."""
+    steps = message.dynamic_map_states[start:start + num_timesteps]
+    lanes = sorted({int(s.lane) for step in steps for s in step.lane_states})
+    row_of = {lane: row for row, lane in enumerate(lanes)}
+    shape = (len(lanes), num_timesteps)
+    state, lane_id = np.zeros(shape, np.int64), np.full(shape, -1, np.int64)
+    valid = np.zeros(shape, bool)
+    xyz = np.full((3,) + shape, -1.0, np.float32)
+    known_states = set(sch.load_schema().enums["traffic_light_state"])
+    for step, dynamic in enumerate(steps):
+        for lane_state in dynamic.lane_states:
+            row = row_of[int(lane_state.lane)]
+            valid[row, step] = True
+            state[row, step] = lane_state.state if lane_state.state in known_states else sch.TL_UNKNOWN
+            lane_id[row, step] = lane_state.lane
+            point = lane_state.stop_point
+            xyz[:, row, step] = (point.x, point.y, point.z)
+    return dict(tl_state=state, tl_valid=valid, tl_lane_id=lane_id, tl_x=xyz[0], tl_y=xyz[1], tl_z=xyz[2])
+
+
+# --- scenarios -----------------------------------------------------------------------------------
+def _object_fields(message) -> dict[str, np.ndarray]:
+    num_tracks = len(message.tracks)
+    types = np.array([t.object_type for t in message.tracks], np.int64)
+    is_sdc = np.zeros(num_tracks, bool)
+    if not 0 <= message.sdc_track_index < num_tracks:
+        raise ScenarioBuildError(f"sdc_track_index {message.sdc_track_index} is outside the {num_tracks} tracks")
+    is_sdc[message.sdc_track_index] = True
+    ids = np.array([t.id for t in message.tracks], np.int64)
+    difficulty = np.zeros(num_tracks, np.int64)
+    to_predict = np.zeros(num_tracks, bool)
+    for required in message.tracks_to_predict:
+        if 0 <= required.track_index < num_tracks:
+            to_predict[required.track_index] = True
+            difficulty[required.track_index] = required.difficulty
+    interest_ids = set(message.objects_of_interest)
+    return dict(
+        object_id=ids,
+        object_type=np.where(np.isin(types, KNOWN_OBJECT_TYPES), types, sch.OBJECT_TYPE_OTHER),
+        is_sdc=is_sdc,
+        tracks_to_predict=to_predict,
+        difficulty_level=difficulty,
+        objects_of_interest=np.array([int(i) in interest_ids for i in ids], bool),
+    )
+
+
+def _window(tracks: dict, start: int, num_timesteps: int, seconds: np.ndarray) -> dict[str, np.ndarray]:
+    cut = slice(start, start + num_timesteps)
+    valid = tracks["valid"][:, cut]
+
+    def field(name: str) -> np.ndarray:
+        return np.where(valid, tracks[name][:, cut], -1.0).astype(np.float32)
+
+    yaw = np.where(valid, wrap_angle(tracks["heading"][:, cut]), -1.0)
+    if len(seconds) >= start + num_timesteps:
+        micros = np.round((seconds[cut] - seconds[start]) * 1e6).astype(np.int64)
+    else:
+        micros = np.arange(num_timesteps, dtype=np.int64) * 100_000
+    return dict(
+        x=field("center_x"), y=field("center_y"), z=field("center_z"), bbox_yaw=yaw.astype(np.float32),
+        length=field("length"), width=field("width"), height=field("height"),
+        velocity_x=field("velocity_x"), velocity_y=field("velocity_y"), valid=valid,
+        timestamp_micros=np.where(valid, micros[None, :], -1), tl_timestamp_micros=micros,
+    )
+
+
+def scenario_windows(message, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE) -> Iterator[Scenario | ScenarioBuildError]:
+    """Every 91-step window of one WOMD Scenario message, fitted to the budget. Windows that cannot be
+    built are yielded as ScenarioBuildError (the caller records them as Failures)."""
+    scenario_id = message.scenario_id or "unnamed"
+    num_steps = len(message.timestamps_seconds)
+    current = message.current_time_index if message.HasField("current_time_index") else sizes.num_past
+    starts = window_starts(num_steps, current, sizes.num_past, sizes.num_timesteps, stride)
+    if not starts:
+        yield ScenarioBuildError(f"scenario {scenario_id}: {num_steps} steps with current index {current} "
+                                 f"cannot hold a {sizes.num_timesteps}-step window")
+        return
+    tracks = track_arrays(message)
+    objects = _object_fields(message)
+    polylines, links = map_polylines(message)
+    roadgraph = polylines_to_roadgraph(polylines)
+    lane_graph = lane_graph_arrays(links, sizes.num_lane_links)
+    seconds = np.asarray(message.timestamps_seconds, np.float64)
+    sdc = int(np.flatnonzero(objects["is_sdc"])[0])
+    for start in starts:
+        window_id = scenario_id if len(starts) == 1 else f"{scenario_id}_t{start:03d}"
+        window = _window(tracks, start, sizes.num_timesteps, seconds)
+        if not window["valid"][sdc, sizes.num_past]:
+            yield ScenarioBuildError(f"scenario {window_id}: the SDC is not valid at the current step")
+            continue
+        per_object = dict(objects)
+        if start + sizes.num_past != current:  # prediction labels belong to the log's own current step
+            for name in ("tracks_to_predict", "objects_of_interest"):
+                per_object[name] = np.zeros_like(objects[name])
+            per_object["difficulty_level"] = np.zeros_like(objects["difficulty_level"])
+        scenario = Scenario(
+            scenario_id=window_id, source_dataset=SOURCE_NAME, current_time_index=sizes.num_past,
+            **per_object, **window, **roadgraph, **lane_graph,
+            **traffic_light_arrays(message, start, sizes.num_timesteps),
+            metadata={"log_start_step": start, "log_num_steps": num_steps},
+        )
+        yield fit_to_budget(scenario, sizes)

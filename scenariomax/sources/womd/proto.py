@@ -1,0 +1,110 @@
+"""The WOMD `Scenario` message (scenario.proto + map.proto), built from its public field numbers.
+
+No TensorFlow, no waymo-open-dataset package and no compiled .proto: the descriptors are written
+here as data and turned into message classes by protobuf's message factory. The messages are
+proto2, so fields this module does not declare (lidar, camera tokens, future additions) are kept
+as unknown fields and never break parsing. Enums are declared as int32 so unexpected enum values
+parse too (the converter maps them).
+"""
+
+from __future__ import annotations
+
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+_PACKAGE = "vmax.womd"
+_F = descriptor_pb2.FieldDescriptorProto
+
+_OPTIONAL, _REPEATED = _F.LABEL_OPTIONAL, _F.LABEL_REPEATED
+_DOUBLE, _FLOAT, _BOOL = _F.TYPE_DOUBLE, _F.TYPE_FLOAT, _F.TYPE_BOOL
+_INT32, _INT64, _STRING, _MESSAGE = _F.TYPE_INT32, _F.TYPE_INT64, _F.TYPE_STRING, _F.TYPE_MESSAGE
+
+# (message name, [(field name, number, type, label, message type name or None)]), from the public
+# waymo-open-dataset protos (scenario.proto, map.proto). Enum fields are int32 on the wire.
+_MESSAGES = (
+    ("MapPoint", [("x", 1, _DOUBLE, _OPTIONAL, None), ("y", 2, _DOUBLE, _OPTIONAL, None),
+                  ("z", 3, _DOUBLE, _OPTIONAL, None)]),
+    ("TrafficSignalLaneState", [("lane", 1, _INT64, _OPTIONAL, None), ("state", 2, _INT32, _OPTIONAL, None),
+                                ("stop_point", 3, _MESSAGE, _OPTIONAL, "MapPoint")]),
+    ("BoundarySegment", [("lane_start_index", 1, _INT32, _OPTIONAL, None),
+                         ("lane_end_index", 2, _INT32, _OPTIONAL, None),
+                         ("boundary_feature_id", 3, _INT64, _OPTIONAL, None),
+                         ("boundary_type", 4, _INT32, _OPTIONAL, None)]),
+    ("LaneNeighbor", [("feature_id", 1, _INT64, _OPTIONAL, None), ("self_start_index", 2, _INT32, _OPTIONAL, None),
+                      ("self_end_index", 3, _INT32, _OPTIONAL, None),
+                      ("neighbor_start_index", 4, _INT32, _OPTIONAL, None),
+                      ("neighbor_end_index", 5, _INT32, _OPTIONAL, None),
+                      ("boundaries", 6, _MESSAGE, _REPEATED, "BoundarySegment")]),
+    ("LaneCenter", [("speed_limit_mph", 1, _DOUBLE, _OPTIONAL, None), ("type", 2, _INT32, _OPTIONAL, None),
+                    ("interpolating", 3, _BOOL, _OPTIONAL, None),
+                    ("polyline", 8, _MESSAGE, _REPEATED, "MapPoint"),
+                    ("entry_lanes", 9, _INT64, _REPEATED, None), ("exit_lanes", 10, _INT64, _REPEATED, None),
+                    ("left_neighbors", 11, _MESSAGE, _REPEATED, "LaneNeighbor"),
+                    ("right_neighbors", 12, _MESSAGE, _REPEATED, "LaneNeighbor"),
+                    ("left_boundaries", 13, _MESSAGE, _REPEATED, "BoundarySegment"),
+                    ("right_boundaries", 14, _MESSAGE, _REPEATED, "BoundarySegment")]),
+    ("RoadEdge", [("type", 1, _INT32, _OPTIONAL, None), ("polyline", 2, _MESSAGE, _REPEATED, "MapPoint")]),
+    ("RoadLine", [("type", 1, _INT32, _OPTIONAL, None), ("polyline", 2, _MESSAGE, _REPEATED, "MapPoint")]),
+    ("StopSign", [("lane", 1, _INT64, _REPEATED, None), ("position", 2, _MESSAGE, _OPTIONAL, "MapPoint")]),
+    ("Crosswalk", [("polygon", 1, _MESSAGE, _REPEATED, "MapPoint")]),
+    ("SpeedBump", [("polygon", 1, _MESSAGE, _REPEATED, "MapPoint")]),
+    ("Driveway", [("polygon", 1, _MESSAGE, _REPEATED, "MapPoint")]),
+    ("MapFeature", [("id", 1, _INT64, _OPTIONAL, None), ("lane", 3, _MESSAGE, _OPTIONAL, "LaneCenter"),
+                    ("road_line", 4, _MESSAGE, _OPTIONAL, "RoadLine"),
+                    ("road_edge", 5, _MESSAGE, _OPTIONAL, "RoadEdge"),
+                    ("stop_sign", 7, _MESSAGE, _OPTIONAL, "StopSign"),
+                    ("crosswalk", 8, _MESSAGE, _OPTIONAL, "Crosswalk"),
+                    ("speed_bump", 9, _MESSAGE, _OPTIONAL, "SpeedBump"),
+                    ("driveway", 10, _MESSAGE, _OPTIONAL, "Driveway")]),
+    ("ObjectState", [("center_x", 2, _DOUBLE, _OPTIONAL, None), ("center_y", 3, _DOUBLE, _OPTIONAL, None),
+                     ("center_z", 4, _DOUBLE, _OPTIONAL, None), ("length", 5, _FLOAT, _OPTIONAL, None),
+                     ("width", 6, _FLOAT, _OPTIONAL, None), ("height", 7, _FLOAT, _OPTIONAL, None),
+                     ("heading", 8, _FLOAT, _OPTIONAL, None), ("velocity_x", 9, _FLOAT, _OPTIONAL, None),
+                     ("velocity_y", 10, _FLOAT, _OPTIONAL, None), ("valid", 11, _BOOL, _OPTIONAL, None)]),
+    ("Track", [("id", 1, _INT32, _OPTIONAL, None), ("object_type", 2, _INT32, _OPTIONAL, None),
+               ("states", 3, _MESSAGE, _REPEATED, "ObjectState")]),
+    ("DynamicMapState", [("lane_states", 1, _MESSAGE, _REPEATED, "TrafficSignalLaneState")]),
+    ("RequiredPrediction", [("track_index", 1, _INT32, _OPTIONAL, None), ("difficulty", 2, _INT32, _OPTIONAL, None)]),
+    ("Scenario", [("timestamps_seconds", 1, _DOUBLE, _REPEATED, None), ("tracks", 2, _MESSAGE, _REPEATED, "Track"),
+                  ("objects_of_interest", 4, _INT32, _REPEATED, None),
+                  ("scenario_id", 5, _STRING, _OPTIONAL, None), ("sdc_track_index", 6, _INT32, _OPTIONAL, None),
+                  ("dynamic_map_states", 7, _MESSAGE, _REPEATED, "DynamicMapState"),
+                  ("map_features", 8, _MESSAGE, _REPEATED, "MapFeature"),
+                  ("current_time_index", 10, _INT32, _OPTIONAL, None),
+                  ("tracks_to_predict", 11, _MESSAGE, _REPEATED, "RequiredPrediction")]),
+)
+_ONEOF_FIELDS = {"MapFeature": ("lane", "road_line", "road_edge", "stop_sign", "crosswalk", "speed_bump", "driveway")}
+
+
+def _build_pool() -> descriptor_pool.DescriptorPool:
+    file_proto = descriptor_pb2.FileDescriptorProto(name="vmax_womd_scenario.proto", package=_PACKAGE,
+                                                    syntax="proto2")
+    for name, fields in _MESSAGES:
+        message = file_proto.message_type.add(name=name)
+        oneof_members = _ONEOF_FIELDS.get(name, ())
+        if oneof_members:
+            message.oneof_decl.add(name="feature_data")
+        for field_name, number, field_type, label, type_name in fields:
+            field = message.field.add(name=field_name, number=number, type=field_type, label=label)
+            if type_name is not None:
+                field.type_name = f".{_PACKAGE}.{type_name}"
+            if field_name in oneof_members:
+                field.oneof_index = 0
+    pool = descriptor_pool.DescriptorPool()
+    pool.Add(file_proto)
+    return pool
+
+
+_POOL = _build_pool()
+
+
+def _message_class(name: str):
+    return message_factory.GetMessageClass(_POOL.FindMessageTypeByName(f"{_PACKAGE}.{name}"))
+
+
+ScenarioProto = _message_class("Scenario")
+MapFeatureProto = _message_class("MapFeature")
+
+# Enum values (facts of the WOMD protos).
+TRACK_TYPE_UNSET = 0
+LANE_TYPE_UNDEFINED, LANE_TYPE_FREEWAY, LANE_TYPE_SURFACE_STREET, LANE_TYPE_BIKE = 0, 1, 2, 3
+ROAD_EDGE_UNKNOWN, ROAD_EDGE_BOUNDARY, ROAD_EDGE_MEDIAN = 0, 1, 2

@@ -1,0 +1,76 @@
+"""Controllable labels, agent paths and traffic-light inference on hand-built scenes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scenariomax import schema as sch
+from scenariomax.enrich import EnrichSettings, controllable_stats, enrich_scenario
+from scenariomax.enrich.roadgraph import MapPolyline
+from tests.enrich.scenes import NUM_STEPS, line, make_scenario, straight_xy, track
+
+LANE = sch.RG_LANE_SURFACE_STREET
+
+
+def _road():
+    return [MapPolyline(1, LANE, line((0, 0), (400, 0), 400)),
+            MapPolyline(5, sch.RG_ROAD_EDGE_BOUNDARY, line((0, -2), (400, -2), 200)),
+            MapPolyline(6, sch.RG_ROAD_EDGE_BOUNDARY, line((400, 5.5), (0, 5.5), 200))]
+
+
+def test_controllable_labels_and_agent_paths():
+    partial = np.ones(NUM_STEPS, bool)
+    partial[60:] = False
+    objects = [
+        track(straight_xy(10, 10.0)),  # SDC
+        track(straight_xy(40, 8.0)),  # moving on the lane: controllable
+        track(np.tile([[60.0, 0.0]], (NUM_STEPS, 1))),  # parked on the lane
+        track(straight_xy(30, 8.0), valid=partial),  # partial track
+        track(straight_xy(20, 1.5, y=0.5), object_type=sch.OBJECT_TYPE_PEDESTRIAN),
+        track(straight_xy(20, 8.0, y=-6.0)),  # beyond the road edge, 6 m from the lane
+    ]
+    out = enrich_scenario(make_scenario(_road(), objects), EnrichSettings(infer_lights=False))
+    assert out.is_controllable.tolist() == [True, True, False, False, False, False]
+    assert out.agent_path_object_index.tolist() == [1]
+    assert out.agent_path_valid[0].sum() > 100 and np.allclose(out.agent_path_xyz[0, 0, :2], [48.0, 0.0], atol=1e-3)
+    stats = controllable_stats([out, out.replace(is_controllable=out.is_controllable & False | out.is_sdc)])
+    assert (stats.num_scenarios, stats.num_with_controllable, stats.mean_per_scenario) == (2, 1, 0.5)
+
+
+def _light_scene(logged_state: int):
+    """Lane 1 runs east to a stop point at x=50. Car 1 waits at x=45 until step 40, then drives
+    through; car 2 crosses north-bound at x=60 during steps 0-40 (cross traffic)."""
+    waiting = np.tile([[45.0, 0.0]], (NUM_STEPS, 1))
+    waiting[41:, 0] = 45.0 + 0.5 * 0.5 * (np.arange(50) * 0.1 * 10) ** 2 / 10  # accelerating east
+    cross = np.column_stack([np.full(NUM_STEPS, 60.0), -20 + 10.0 * 0.1 * np.arange(NUM_STEPS)])
+    objects = [track(straight_xy(-60, 0.0)) , track(waiting), track(cross)]
+    objects[0]["yaw"][:] = 0.0
+    num_steps = NUM_STEPS
+    lights = dict(tl_state=np.zeros((1, num_steps), np.int64), tl_valid=np.zeros((1, num_steps), bool),
+                  tl_lane_id=np.full((1, num_steps), 1), tl_x=np.full((1, num_steps), 50.0),
+                  tl_y=np.zeros((1, num_steps)), tl_z=np.zeros((1, num_steps)))
+    lights["tl_state"][0, 0], lights["tl_valid"][0, 0] = logged_state, True
+    polylines = [MapPolyline(1, LANE, line((-100, 0), (50, 0), 300)),
+                 MapPolyline(2, LANE, line((50, 0), (200, 0), 300)),
+                 MapPolyline(3, LANE, line((60, -60), (60, 60), 240))]
+    return make_scenario(polylines, objects, **lights)
+
+
+def test_light_inferred_red_while_queued_and_green_when_crossing():
+    scenario = _light_scene(logged_state=sch.TL_CAUTION)
+    out = enrich_scenario(scenario, EnrichSettings(label_controllable=False))
+    state, inferred = out.tl_state[0], out.tl_inferred[0]
+    assert state[0] == sch.TL_CAUTION and not inferred[0]  # logged state kept
+    assert (state[1:30] == sch.TL_STOP).all() and inferred[1:30].all()
+    crossing = int(np.argmax(out.x[1] >= 50.0))
+    assert 41 < crossing < 70
+    assert state[crossing] == sch.TL_GO and inferred[crossing]
+    assert out.tl_valid[0, crossing] and out.tl_lane_id[0, crossing] == 1
+    assert not inferred[crossing + 30:].any() and (state[crossing + 30:] == 0).all()  # no evidence: unknown
+
+
+def test_light_without_lane_or_evidence_stays_unknown():
+    scenario = _light_scene(logged_state=sch.TL_GO)
+    scenario = scenario.replace(tl_lane_id=np.full_like(scenario.tl_lane_id, -1))
+    out = enrich_scenario(scenario, EnrichSettings(label_controllable=False))
+    assert not out.tl_inferred.any() and out.tl_valid[0].sum() == 1

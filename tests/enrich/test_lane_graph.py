@@ -1,0 +1,63 @@
+"""Lane graph: explicit links are used, otherwise links are rebuilt from geometry."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scenariomax import schema as sch
+from scenariomax.enrich import extract_lanes, lane_graph_to_arrays, rebuild_lane_graph, scenario_lane_graph
+from scenariomax.enrich.roadgraph import LaneLinks, MapPolyline, lane_graph_arrays
+from tests.enrich.scenes import line, make_scenario, straight_xy, track
+
+LANE = sch.RG_LANE_SURFACE_STREET
+
+
+def _ids(lanes, indices):
+    return sorted(int(lanes.ids[k]) for k in indices)
+
+
+def test_fork_gets_both_successors_and_opposite_lane_none():
+    arc = np.array([[20 + 20 * np.sin(a), 20 - 20 * np.cos(a), 0.0] for a in np.linspace(0, np.pi / 2, 40)])
+    polylines = [
+        MapPolyline(10, LANE, line((0, 0), (20, 0))),
+        MapPolyline(11, LANE, line((20, 0), (60, 0))),  # straight on
+        MapPolyline(12, LANE, arc),  # curve to the left, tangent at the fork
+        MapPolyline(13, LANE, line((20.5, 0.5), (0, 0.5))),  # opposite direction, starts at the fork
+        MapPolyline(14, LANE, line((21, 0), (21, 30))),  # perpendicular: not a successor
+    ]
+    scenario = make_scenario(polylines, [track(straight_xy(0, 5))])
+    lanes = extract_lanes(scenario)
+    graph = rebuild_lane_graph(lanes)
+    first = lanes.index_of[10]
+    assert _ids(lanes, graph.successors[first]) == [11, 12]
+    assert _ids(lanes, graph.predecessors[lanes.index_of[12]]) == [10]
+    assert _ids(lanes, graph.successors[lanes.index_of[13]]) == []
+
+
+def test_parallel_lanes_are_left_and_right_neighbours_unless_an_edge_separates_them():
+    polylines = [MapPolyline(1, LANE, line((0, 0), (100, 0))), MapPolyline(2, LANE, line((0, 3.5), (100, 3.5))),
+                 MapPolyline(3, LANE, line((0, 10), (100, 10))),  # 6.5 m away: too far
+                 MapPolyline(4, LANE, line((0, -3.5), (100, -3.5))),
+                 MapPolyline(9, sch.RG_ROAD_EDGE_MEDIAN, line((0, -1.75), (100, -1.75)))]
+    scenario = make_scenario(polylines, [track(straight_xy(0, 5))])
+    lanes = extract_lanes(scenario)
+    graph, rebuilt = scenario_lane_graph(scenario, lanes)
+    assert rebuilt
+    one = lanes.index_of[1]
+    assert _ids(lanes, graph.left[one]) == [2]
+    assert _ids(lanes, graph.right[one]) == []  # lane 4 lies beyond the median edge
+    assert _ids(lanes, graph.right[lanes.index_of[2]]) == [1]
+    arrays = lane_graph_to_arrays(lanes, graph, num_lane_links=4)
+    row = list(arrays["lane_id"]).index(1)
+    assert list(arrays["lane_left_neighbors"][row]) == [2, -1, -1, -1]
+
+
+def test_explicit_links_win_over_geometry():
+    polylines = [MapPolyline(1, LANE, line((0, 0), (50, 0))), MapPolyline(2, LANE, line((50, 0), (100, 0)))]
+    links = lane_graph_arrays([LaneLinks(1, successors=()), LaneLinks(2, predecessors=(1,))])
+    scenario = make_scenario(polylines, [track(straight_xy(0, 5))], **links)
+    lanes = extract_lanes(scenario)
+    graph, rebuilt = scenario_lane_graph(scenario, lanes)
+    assert not rebuilt
+    assert graph.successors[lanes.index_of[1]] == ()  # the source says so, geometry would link them
+    assert _ids(lanes, graph.predecessors[lanes.index_of[2]]) == [1]

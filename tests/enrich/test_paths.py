@@ -1,0 +1,84 @@
+"""SDC paths: start lanes, successor search, lane changes that follow the log, ranking, padding."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from scenariomax import schema as sch
+from scenariomax.enrich import EnrichSettings, enrich_scenario
+from scenariomax.enrich.geometry import project_to_polyline
+from scenariomax.enrich.roadgraph import MapPolyline
+from tests.enrich.scenes import CURRENT, NUM_STEPS, line, make_scenario, straight_xy, track
+
+LANE = sch.RG_LANE_SURFACE_STREET
+FAST = EnrichSettings(label_controllable=False, infer_lights=False)
+
+
+def _two_lanes(length=400.0):
+    return [MapPolyline(1, LANE, line((0, 0), (length, 0), 400)), MapPolyline(2, LANE, line((0, 3.5), (length, 3.5), 400))]
+
+
+def _lane_change_xy():
+    """10 m/s east; moves from y=0 to y=3.5 between steps 30 and 60 (smooth)."""
+    xy = straight_xy(10, 10.0)
+    u = np.clip((np.arange(NUM_STEPS) - 30) / 30.0, 0, 1)
+    xy[:, 1] = 3.5 * (u * u * (3 - 2 * u))
+    return xy
+
+
+def test_straight_lane_path_starts_at_projection_and_is_padded():
+    xy = straight_xy(10, 10.0, y=0.4)
+    polylines = [MapPolyline(1, LANE, line((0, 0), (200, 0), 200))]
+    out = enrich_scenario(make_scenario(polylines, [track(xy)]), FAST)
+    assert out.path_xyz.shape == (10, 300, 3)
+    assert out.path_valid[0].sum() == 181  # 200 m lane, start at x=20: 180 m -> 181 points at 1 m
+    np.testing.assert_allclose(out.path_xyz[0, 0, :2], [20.0, 0.0], atol=1e-4)
+    np.testing.assert_allclose(np.diff(out.path_arc_length[0, :181]), 1.0, atol=1e-4)
+    assert out.path_on_route[0] and not out.path_valid[0, 181:].any()
+    assert set(out.path_lane_id[0, :181]) == {1}
+
+
+def test_lane_change_path_follows_the_logged_change():
+    xy = _lane_change_xy()
+    out = enrich_scenario(make_scenario(_two_lanes(), [track(xy)]), FAST)
+    best = out.path_xyz[0][out.path_valid[0]]
+    assert out.path_on_route[0]
+    dist = project_to_polyline(xy[CURRENT:], best)[0]
+    assert dist.max() < 0.3  # the blend follows the log exactly where it changes lanes
+    ids = out.path_lane_id[0][out.path_valid[0]]
+    assert ids[0] == 1 and ids[-1] == 2
+    # The stay-in-lane path exists too, ranked lower and off route.
+    stays = [p for p in range(10) if out.path_valid[p].any() and set(out.path_lane_id[p][out.path_valid[p]]) == {1}]
+    assert stays and not out.path_on_route[stays[0]] and stays[0] > 0
+
+
+def test_successor_chain_and_dead_end_branch_ranked_by_the_log():
+    polylines = [MapPolyline(1, LANE, line((0, 0), (50, 0))), MapPolyline(2, LANE, line((50, 0), (400, 0), 400)),
+                 MapPolyline(3, LANE, line((50, 0), (80, 17.3)))]  # 30-deg branch, not taken
+    out = enrich_scenario(make_scenario(polylines, [track(straight_xy(10, 10.0))]), FAST)
+    first = out.path_lane_id[0][out.path_valid[0]]
+    assert list(dict.fromkeys(first.tolist())) == [1, 2] and out.path_on_route[0]
+    assert out.path_valid[0].sum() == 300  # budget reached
+    branch = [p for p in range(10) if 3 in out.path_lane_id[p]]
+    assert branch and not out.path_on_route[branch[0]]
+
+
+def test_missing_connector_is_bridged_along_the_log():
+    # Lane 1 ends at x=50, lane 2 starts at x=70: the map lacks the 20 m connector.
+    polylines = [MapPolyline(1, LANE, line((0, 0), (50, 0))), MapPolyline(2, LANE, line((70, 0), (300, 0), 300))]
+    out = enrich_scenario(make_scenario(polylines, [track(straight_xy(10, 10.0))]), FAST)
+    assert out.path_on_route[0]
+    assert list(dict.fromkeys(out.path_lane_id[0][out.path_valid[0]].tolist())) == [1, 2]
+
+
+def test_no_lane_near_the_sdc_is_a_one_line_value_error():
+    polylines = [MapPolyline(1, LANE, line((0, 50), (100, 50)))]
+    with pytest.raises(ValueError, match="no lane within"):
+        enrich_scenario(make_scenario(polylines, [track(straight_xy(10, 10.0))]), FAST)
+
+
+def test_lane_heading_against_the_sdc_is_not_a_start_lane():
+    polylines = [MapPolyline(1, LANE, line((200, 0), (0, 0), 200))]  # runs west, SDC drives east
+    with pytest.raises(ValueError):
+        enrich_scenario(make_scenario(polylines, [track(straight_xy(10, 10.0))]), FAST)

@@ -1,0 +1,154 @@
+"""Observation: SDC frame, normalisation, fixed shapes with masks, map box, lights, route, noise."""
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from scenariomax.schema import OBJECT_TYPE_PEDESTRIAN, OBJECT_TYPE_VEHICLE, TL_GO, TL_STOP
+from tests.metrics.helpers import road_index, route_paths
+from vmax_sim.observation import (
+    LIGHT_FEATURES,
+    OBJECT_FEATURES,
+    ROADGRAPH_FEATURES,
+    NoiseConfig,
+    ObservationConfig,
+    ObservationInputs,
+    observe,
+)
+from vmax_sim.observation.features import compact
+
+K = 5
+
+
+def obs_inputs(objects=((10.0, 0.0, 0.0, 5.0),), sdc_yaw=0.0, lights=()):
+    """SDC at the origin; objects (x, y, yaw, speed) static in the history, all vehicles."""
+    n = 6
+    xy = np.zeros((n, K, 2), np.float32)
+    yaw = np.zeros((n, K), np.float32)
+    vel = np.zeros((n, K, 2), np.float32)
+    valid = np.zeros((n, K), bool)
+    for i, (x, y, heading, speed) in enumerate(objects):
+        xy[i], yaw[i], valid[i] = (x, y), heading, True
+        vel[i] = speed * np.array([np.cos(heading), np.sin(heading)])
+    types = np.full(n, OBJECT_TYPE_VEHICLE, np.int32)
+    types[1] = OBJECT_TYPE_PEDESTRIAN
+    light_xy = np.zeros((8, 2), np.float32)
+    light_state = np.zeros(8, np.int32)
+    light_valid = np.zeros(8, bool)
+    for i, (x, y, state) in enumerate(lights):
+        light_xy[i], light_state[i], light_valid[i] = (x, y), state, True
+    path_xy, path_valid, path_arc, on_route = route_paths()
+    sdc_xy = np.stack([np.arange(-K + 1, 1, dtype=np.float32), np.zeros(K, np.float32)], -1)
+    return ObservationInputs(
+        sdc_xy=jnp.asarray(sdc_xy), sdc_yaw=jnp.full(K, sdc_yaw, jnp.float32),
+        sdc_vel=jnp.tile(jnp.array([[10.0, 0.0]]), (K, 1)), sdc_valid=jnp.ones(K, bool),
+        object_xy=jnp.asarray(xy), object_yaw=jnp.asarray(yaw), object_vel=jnp.asarray(vel),
+        object_size=jnp.tile(jnp.array([[4.5, 2.0]]), (n, 1)), object_type=jnp.asarray(types),
+        object_valid=jnp.asarray(valid), light_xy=jnp.asarray(light_xy), light_state=jnp.asarray(light_state),
+        light_valid=jnp.asarray(light_valid), path_xy=jnp.asarray(path_xy), path_valid=jnp.asarray(path_valid),
+        path_arc=jnp.asarray(path_arc), path_on_route=jnp.asarray(on_route))
+
+
+@pytest.fixture(scope="module")
+def index():
+    return road_index()
+
+
+OBSERVE = jax.jit(observe, static_argnames=("config",))
+
+
+def test_shapes_and_object_features(index):
+    config = ObservationConfig(num_objects=4, num_history=K)
+    obs = OBSERVE(index, obs_inputs(objects=[(10.0, 0.0, np.pi / 2, 5.0), (0.0, 25.0, 0.0, 0.0)]), config)
+    assert obs.objects.shape == (4, K, OBJECT_FEATURES) and obs.objects_valid.shape == (4, K)
+    assert obs.roadgraph.shape[1] == ROADGRAPH_FEATURES and obs.lights.shape == (5, LIGHT_FEATURES)
+    assert obs.path_targets.shape == (10, 2)
+    first = np.asarray(obs.objects[0, -1])
+    # 10 m ahead / 50 m; velocity 5 m/s along +y / 30; heading +90 deg; size / 10; vehicle one-hot
+    np.testing.assert_allclose(first[:8], [0.2, 0.0, 0.0, 5 / 30, 0.0, 1.0, 0.45, 0.2], atol=1e-5)
+    np.testing.assert_allclose(first[8:], [1, 0, 0, 0])
+    assert np.asarray(obs.objects_valid).sum(axis=1).tolist() == [K, K, 0, 0]
+    assert np.all(np.asarray(obs.objects[2:]) == 0)
+    assert all(x.dtype in (jnp.float32, jnp.bool_) for x in jax.tree_util.tree_leaves(obs))
+
+
+def test_features_rotate_into_the_sdc_frame(index):
+    obs = OBSERVE(index, obs_inputs(objects=[(0.0, 10.0, np.pi / 2, 0.0)], sdc_yaw=np.pi / 2), ObservationConfig())
+    # an object 10 m along +y is straight ahead of an SDC heading +y (SDC at the origin now)
+    np.testing.assert_allclose(obs.objects[0, -1, :2], [0.2, 0.0], atol=1e-5)
+    np.testing.assert_allclose(obs.objects[0, -1, 4:6], [1.0, 0.0], atol=1e-5)
+
+
+def test_roadgraph_points_lie_in_the_box_ahead(index):
+    config = ObservationConfig()
+    obs = OBSERVE(index, obs_inputs(), config)
+    pts = np.asarray(obs.roadgraph)[np.asarray(obs.roadgraph_valid)] * config.max_distance
+    assert len(pts) > 20
+    assert pts[:, 0].min() >= -5.0 and pts[:, 0].max() <= 50.0 and np.abs(pts[:, 1]).max() <= 20.0
+    assert set(np.round(pts[:, 1].astype(np.float64), 2).tolist()) <= {0.0, 3.7, 1.85, -1.85, 5.55}
+    edges_only = OBSERVE(index, obs_inputs(), ObservationConfig(roadgraph_types="edges"))
+    kinds = np.asarray(edges_only.roadgraph)[np.asarray(edges_only.roadgraph_valid)][:, 5:]
+    assert len(kinds) > 0 and np.all(kinds == [1, 0, 0])
+
+
+def test_packed_roadgraph_keeps_a_fixed_number_of_points(index):
+    config = ObservationConfig(num_roadgraph_points=16)
+    obs = OBSERVE(index, obs_inputs(), config)
+    assert obs.roadgraph.shape == (16, ROADGRAPH_FEATURES)
+    assert 8 <= int(obs.roadgraph_valid.sum()) <= 16  # evenly thinned: every stride-th in-box point
+    source, filled = compact(jnp.array([True, False, True, True, False, True]), 3)
+    # 4 valid entries into 3 slots: stride 2 keeps the 1st and 3rd valid entries
+    assert np.asarray(source)[np.asarray(filled)].tolist() == [0, 3] and np.asarray(filled).tolist() == [True, True, False]
+
+
+def test_closest_lights_and_path_targets(index):
+    lights = [(30.0, 0.0, TL_GO), (8.0, 1.0, TL_STOP), (200.0, 0.0, TL_STOP)]
+    obs = OBSERVE(index, obs_inputs(lights=lights), ObservationConfig(num_lights=2))
+    np.testing.assert_allclose(obs.lights[0], [8 / 50, 1 / 50, 1, 0, 0, 0], atol=1e-6)
+    np.testing.assert_allclose(obs.lights[1], [30 / 50, 0, 0, 0, 1, 0], atol=1e-6)
+    # route along lane 1 from the SDC at x = 0: targets every 5 m ahead
+    np.testing.assert_allclose(obs.path_targets[:, 0] * 50, 5.0 * np.arange(1, 11), atol=1e-3)
+    assert bool(jnp.all(obs.path_targets_valid))
+
+
+def test_noise_is_driven_by_the_key(index):
+    config = ObservationConfig(noise=NoiseConfig(position_std=0.5))
+    inputs = obs_inputs()
+    a = OBSERVE(index, inputs, config, jax.random.PRNGKey(0))
+    b = OBSERVE(index, inputs, config, jax.random.PRNGKey(0))
+    c = OBSERVE(index, inputs, config, jax.random.PRNGKey(1))
+    np.testing.assert_array_equal(a.objects, b.objects)
+    assert not np.allclose(a.objects, c.objects)
+
+
+def test_dropout_and_occlusion(index):
+    far_drop = ObservationConfig(noise=NoiseConfig(dropout_start=5.0, dropout_max_prob=1.0))
+    inputs = obs_inputs(objects=[(49.0, 0.0, 0.0, 0.0), (3.0, 0.0, 0.0, 0.0)])
+    dropped = OBSERVE(index, inputs, far_drop, jax.random.PRNGKey(0))
+    assert np.asarray(dropped.objects_valid[:, -1]).tolist()[:2] == [True, False]  # sorted by distance: near, far
+    occluding = ObservationConfig(noise=NoiseConfig(occlusion=True))
+    hidden = OBSERVE(index, obs_inputs(objects=[(20.0, 0.0, 0.0, 0.0), (10.0, 0.0, 0.0, 0.0), (10.0, 8.0, 0.0, 0.0)]),
+                     occluding, jax.random.PRNGKey(0))
+    # the car at 20 m is behind the one at 10 m; the one off to the side stays visible
+    assert int(hidden.objects_valid[:, -1].sum()) == 2
+
+
+def test_batched_equals_unbatched_and_no_recompiles(index):
+    config = ObservationConfig()
+    cases = [obs_inputs(), obs_inputs(objects=[(5.0, 3.0, 0.3, 2.0)], sdc_yaw=0.4)]
+    batch = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *cases)
+    indexes = jax.tree_util.tree_map(lambda x: jnp.stack([x, x]), index)
+
+    @jax.jit
+    @chex.assert_max_traces(n=1)
+    def batched(indexes, batch):
+        return jax.vmap(lambda i, b: observe(i, b, config))(indexes, batch)
+
+    got = batched(indexes, batch)
+    for i, case in enumerate(cases):
+        single = OBSERVE(index, case, config)
+        for a, b in zip(jax.tree_util.tree_leaves(single), jax.tree_util.tree_leaves(got)):
+            np.testing.assert_allclose(b[i], a, rtol=1e-5, atol=1e-5)
+    batched(indexes, jax.tree_util.tree_map(lambda x: x + 0.1 if x.dtype == jnp.float32 else x, batch))

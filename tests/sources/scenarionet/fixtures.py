@@ -1,0 +1,68 @@
+"""Tiny ScenarioNet scenario descriptions built by the tests, pickled like ScenarioNet does."""
+
+from __future__ import annotations
+
+import pickle
+from pathlib import Path
+
+import numpy as np
+
+# Stable int ids: keys sorted as strings.
+OBJECT_IDS = {"cone": 0, "ego": 1, "ped-a": 2}
+MAP_IDS = {"crosswalk-1": 0, "drivable-1": 1, "edge-1": 2, "lane-1": 3, "lane-2": 4}
+
+
+def _state(num_steps, position, heading, velocity, size, valid, size_shape):
+    return {"position": position, "heading": heading, "velocity": velocity, "valid": valid.astype(float),
+            **{name: np.full(size_shape, value) for name, value in zip(("length", "width", "height"), size)}}
+
+
+def build_description(num_steps: int = 41, step_seconds: float = 0.25, scenario_id: str = "toy-sn",
+                      with_ts: bool = False) -> dict:
+    """The SDC ('ego') drives east at 2 m/s along y = 0 (x = 2 t). 'ped-a' walks north at x = 5, valid
+    except at source step 3. 'cone' stands still at (10, -3) with a 2-D position. Map: lane-1 (0..100 m,
+    36 km/h) -> lane-2 (100..150 m, 30 mph), edge-1 at y = -2 drawn west-bound (must be flipped), a
+    crosswalk and a drivable-area polygon (not in our enum: skipped). A light on lane-1: red for the
+    first 5 s, then green; stop point (50, 0, 0)."""
+    t = np.arange(num_steps) * step_seconds
+    ones = np.ones(num_steps)
+    ego = _state(num_steps, np.stack([2 * t, 0 * t, 0 * t + 0.5], 1), 0.0 * t, np.stack([2 + 0 * t, 0 * t], 1),
+                 (4.5, 2.0, 1.5), ones > 0, (num_steps, 1))
+    ped_valid = ones > 0
+    ped_valid[3] = False
+    ped = _state(num_steps, np.stack([5 + 0 * t, 3 + t, 0 * t], 1), np.full((num_steps, 1), np.pi / 2),
+                 np.stack([0 * t, 1 + 0 * t], 1), (0.5, 0.5, 1.8), ped_valid, (num_steps,))
+    cone = _state(num_steps, np.stack([10 + 0 * t, -3 + 0 * t], 1), 0 * t, np.zeros((num_steps, 2)),
+                  (0.3, 0.3, 0.7), ones > 0, (num_steps,))
+    tracks = {
+        "ego": {"type": "VEHICLE", "state": ego, "metadata": {"object_id": "ego"}},
+        "ped-a": {"type": "PEDESTRIAN", "state": ped, "metadata": {"object_id": "ped-a"}},
+        "cone": {"type": "TRAFFIC_CONE", "state": cone, "metadata": {"object_id": "cone"}},
+    }
+    map_features = {
+        "lane-1": {"type": "LANE_SURFACE_STREET", "polyline": [(float(x), 0.0, 0.0) for x in range(0, 101, 5)],
+                   "speed_limit_kmh": 36.0, "exit_lanes": ["lane-2"], "entry_lanes": [], "left_neighbor": [],
+                   "right_neighbor": []},
+        "lane-2": {"type": "LANE_FREEWAY", "polyline": np.array([[100.0, 0.0], [150.0, 0.0]]),
+                   "speed_limit_mph": 30.0, "entry_lanes": ["lane-1"]},
+        "edge-1": {"type": "ROAD_EDGE_BOUNDARY", "polyline": np.array([[150.0, -2.0], [0.0, -2.0]])},
+        "crosswalk-1": {"type": "CROSSWALK", "polygon": [[20.0, -1.0], [22.0, -1.0], [22.0, 1.0], [20.0, 1.0]]},
+        "drivable-1": {"type": "DRIVABLE_AREA", "polygon": [[0.0, -5.0], [150.0, -5.0], [150.0, 5.0]]},
+    }
+    red_steps = round(5.0 / step_seconds)
+    lights = {"tl-1": {"type": "TRAFFIC_LIGHT", "lane": "lane-1", "stop_point": np.array([50.0, 0.0, 0.0]),
+                       "state": {"object_state": ["TRAFFIC_LIGHT_RED"] * red_steps
+                                 + ["TRAFFIC_LIGHT_GREEN"] * (num_steps - red_steps)}}}
+    metadata = {"scenario_id": scenario_id, "id": scenario_id, "dataset": "toy", "sdc_id": "ego",
+                "timestep": step_seconds, "objects_of_interest": ["ped-a"],
+                "tracks_to_predict": {"ped-a": {"track_id": "ped-a", "track_index": 1, "difficulty": 1}}}
+    if with_ts:
+        metadata["ts"] = t + 100.0
+    return {"id": scenario_id, "version": "test", "length": num_steps, "tracks": tracks,
+            "map_features": map_features, "dynamic_map_states": lights, "metadata": metadata}
+
+
+def write_pickle(path: Path, obj) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(pickle.dumps(obj, protocol=4))
+    return path

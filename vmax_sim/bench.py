@@ -1,0 +1,298 @@
+"""`vmax-sim bench`: scene-steps per second of the simulator step on synthetic scenes.
+
+Scenes are random but plausible (straight multi-lane roads crossing the region, vehicles driving
+along lanes, lights, SDC paths), generated in numpy; the map index is built once per scene on the
+host. The step is a minimal local one on plain arrays (kinematic bicycle for the SDC, log replay
+for everyone else) until the env is wired in. Timings run inside a jitted `lax.scan` over steps
+and `vmap` over the batch; compile time is reported separately.
+"""
+
+from __future__ import annotations
+
+import json as json_lib
+import time
+
+import flax.struct
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from scenariomax.schema import (
+    OBJECT_TYPE_VEHICLE,
+    RG_BROKEN_SINGLE_WHITE,
+    RG_LANE_SURFACE_STREET,
+    RG_ROAD_EDGE_BOUNDARY,
+    RG_SOLID_DOUBLE_YELLOW,
+    TL_GO,
+    TL_STOP,
+)
+from vmax_sim.map_index import (
+    MapIndex,
+    MapIndexConfig,
+    build_map_index,
+    path_arc_length,
+    route_reference_arcs,
+)
+from vmax_sim.metrics import MetricsConfig, StepInputs, shared_queries, step_metrics
+from vmax_sim.observation import ObservationConfig, ObservationInputs, observe
+
+NUM_STEPS_LOG = 91
+LANE_WIDTH = 3.7
+HISTORY = 5  # observation history; the metrics use the last 3
+
+
+# ----------------------------------------------------------------------------- synthetic scenes
+
+
+def _road_polylines(origin, angle, length, rng_id):
+    """Lanes, lines and edges of a 2+2-lane road through `origin`. -> list of (xy (n, 2), type, id)."""
+    heading = np.array([np.cos(angle), np.sin(angle)])
+    left = np.array([-heading[1], heading[0]])
+    s = np.arange(-0.5 * length, 0.5 * length, 1.0)
+    out = []
+    for k, (offset, kind, backwards) in enumerate([
+            (-0.5 * LANE_WIDTH, RG_LANE_SURFACE_STREET, False), (-1.5 * LANE_WIDTH, RG_LANE_SURFACE_STREET, False),
+            (0.5 * LANE_WIDTH, RG_LANE_SURFACE_STREET, True), (1.5 * LANE_WIDTH, RG_LANE_SURFACE_STREET, True),
+            (0.0, RG_SOLID_DOUBLE_YELLOW, False), (-LANE_WIDTH, RG_BROKEN_SINGLE_WHITE, False),
+            (LANE_WIDTH, RG_BROKEN_SINGLE_WHITE, False),
+            (-2 * LANE_WIDTH, RG_ROAD_EDGE_BOUNDARY, False), (2 * LANE_WIDTH, RG_ROAD_EDGE_BOUNDARY, True)]):
+        ss = s[::-1] if backwards else s
+        xy = origin + ss[:, None] * heading + offset * left
+        out.append((xy, kind, rng_id * 16 + k))
+    return out
+
+
+def synthetic_scene(num_roadgraph: int, num_objects: int = 64, seed: int = 0) -> dict:
+    """A random scene as plain numpy arrays in the shard's conventions (SDC in slot 0)."""
+    rng = np.random.default_rng(seed)
+    polylines = _road_polylines(np.zeros(2), 0.0, 600.0, 0)
+    road = 1
+    while sum(len(p[0]) for p in polylines) < num_roadgraph:
+        origin = rng.uniform(-250, 250, 2)
+        polylines += _road_polylines(origin, rng.uniform(0, np.pi), 500.0, road)
+        road += 1
+    xy = np.concatenate([p[0] for p in polylines])[:num_roadgraph]
+    types = np.concatenate([np.full(len(p[0]), p[1]) for p in polylines])[:num_roadgraph]
+    ids = np.concatenate([np.full(len(p[0]), p[2]) for p in polylines])[:num_roadgraph]
+    xyz = np.concatenate([xy, np.zeros((len(xy), 1))], 1).astype(np.float32)
+    diff = np.diff(xy, axis=0, append=xy[-1:])
+    dirs = np.concatenate([diff / np.maximum(np.linalg.norm(diff, axis=1, keepdims=True), 1e-6),
+                           np.zeros((len(xy), 1))], 1).astype(np.float32)
+    speed_limit = np.where(types == RG_LANE_SURFACE_STREET, 13.4, -1.0).astype(np.float32)
+
+    # vehicles along the lanes of road 0 (both directions), the SDC first on the right lane
+    t = np.arange(NUM_STEPS_LOG) * 0.1
+    lane_y = rng.choice([-0.5, -1.5, 0.5, 1.5], num_objects) * LANE_WIDTH
+    lane_y[0] = -0.5 * LANE_WIDTH
+    direction = np.where(lane_y < 0, 1.0, -1.0)
+    x0 = rng.uniform(-120, 120, num_objects)
+    x0[0] = -40.0
+    speed = rng.uniform(3, 14, num_objects)
+    speed[0] = 10.0
+    obj_x = x0[:, None] + direction[:, None] * speed[:, None] * t[None]
+    obj_xy = np.stack([obj_x, np.broadcast_to(lane_y[:, None], obj_x.shape)], -1).astype(np.float32)
+    obj_yaw = np.broadcast_to(np.where(direction > 0, 0.0, np.pi)[:, None], obj_x.shape).astype(np.float32)
+    obj_vel = np.stack([direction[:, None] * speed[:, None] * np.ones_like(t), np.zeros_like(obj_x)], -1)
+    size = np.stack([rng.uniform(4.0, 5.5, num_objects), rng.uniform(1.8, 2.2, num_objects)], -1)
+
+    lights_xy = np.stack([np.linspace(-100, 200, 16), np.full(16, -0.5 * LANE_WIDTH)], -1).astype(np.float32)
+    lights_state = np.where(np.arange(16) % 2 == 0, TL_STOP, TL_GO).astype(np.int32)
+
+    px = np.linspace(-60, 240, 300)
+    path_xy = np.stack([np.stack([px, np.full(300, -k * 0.5 * LANE_WIDTH)], -1) for k in range(1, 11)]).astype(np.float32)
+    path_valid = np.ones((10, 300), bool)
+    return {"xyz": xyz, "dir": dirs, "types": types, "ids": ids, "valid": np.ones(len(xy), bool), "speed_limit": speed_limit,
+                "obj_xy": obj_xy, "obj_yaw": obj_yaw, "obj_vel": obj_vel.astype(np.float32), "obj_size": size.astype(np.float32),
+                "obj_type": np.full(num_objects, OBJECT_TYPE_VEHICLE, np.int32), "obj_valid": np.ones(obj_x.shape, bool),
+                "light_xy": lights_xy, "light_lane_id": np.full(16, 0, np.int32), "light_state": lights_state,
+                "light_valid": np.ones(16, bool), "path_xy": path_xy, "path_valid": path_valid,
+                "path_arc": path_arc_length(path_xy, path_valid),
+                "path_on_route": np.arange(10) < 2}
+
+
+@flax.struct.dataclass
+class BenchScene:
+    """Static per-scene arrays (log, lights, paths) plus the map index."""
+
+    map_index: MapIndex
+    obj_xy: jnp.ndarray  # (N, T, 2)
+    obj_yaw: jnp.ndarray  # (N, T)
+    obj_vel: jnp.ndarray  # (N, T, 2)
+    obj_size: jnp.ndarray  # (N, 2)
+    obj_type: jnp.ndarray  # (N,)
+    obj_valid: jnp.ndarray  # (N, T)
+    light_xy: jnp.ndarray  # (L, 2)
+    light_lane_id: jnp.ndarray  # (L,)
+    light_state: jnp.ndarray  # (L,)
+    light_valid: jnp.ndarray  # (L,)
+    path_xy: jnp.ndarray  # (P, M, 2)
+    path_valid: jnp.ndarray  # (P, M)
+    path_arc: jnp.ndarray  # (P, M)
+    path_on_route: jnp.ndarray  # (P,)
+    path_log_arc: jnp.ndarray  # (P, 2), computed once per scene
+
+
+@flax.struct.dataclass
+class BenchState:
+    t: jnp.ndarray  # () int32, log step
+    sdc_xy: jnp.ndarray  # (HISTORY, 2)
+    sdc_yaw: jnp.ndarray  # (HISTORY,)
+    sdc_speed: jnp.ndarray  # ()
+
+
+def make_scene(arrays: dict, config: MapIndexConfig | None = None) -> BenchScene:
+    """Host side: build the map index around the SDC's start and wrap the arrays."""
+    index = build_map_index(arrays["xyz"], arrays["dir"], arrays["types"], arrays["ids"], arrays["valid"],
+                            config, arrays["obj_xy"][0, HISTORY - 1], speed_limit=arrays["speed_limit"])
+    keys = [f.name for f in BenchScene.__dataclass_fields__.values() if f.name not in ("map_index", "path_log_arc")]
+    log_arc = route_reference_arcs(jnp.asarray(arrays["path_xy"]), jnp.asarray(arrays["path_valid"]),
+                                   jnp.asarray(arrays["path_arc"]), jnp.asarray(arrays["obj_xy"][0, HISTORY - 1]),
+                                   jnp.asarray(arrays["obj_xy"][0, -1]))
+    return BenchScene(map_index=index, path_log_arc=log_arc, **{k: jnp.asarray(arrays[k]) for k in keys})
+
+
+def initial_state(scene: BenchScene) -> BenchState:
+    return BenchState(t=jnp.asarray(HISTORY - 1, jnp.int32), sdc_xy=scene.obj_xy[0, :HISTORY],
+                      sdc_yaw=scene.obj_yaw[0, :HISTORY], sdc_speed=jnp.linalg.norm(scene.obj_vel[0, HISTORY - 1]))
+
+
+def env_step(state: BenchState, action: jnp.ndarray, dt: float = 0.1) -> BenchState:
+    """Kinematic bicycle for the SDC (action = [accel, curvature]); the log replays the rest."""
+    speed = jnp.maximum(state.sdc_speed + action[0] * dt, 0.0)
+    yaw = state.sdc_yaw[-1] + speed * action[1] * dt
+    xy = state.sdc_xy[-1] + speed * dt * jnp.stack([jnp.cos(yaw), jnp.sin(yaw)])
+    num_log = NUM_STEPS_LOG
+    return BenchState(t=jnp.minimum(state.t + 1, num_log - 1),
+                      sdc_xy=jnp.concatenate([state.sdc_xy[1:], xy[None]]),
+                      sdc_yaw=jnp.concatenate([state.sdc_yaw[1:], yaw[None]]), sdc_speed=speed)
+
+
+def _window(x, t, axis_len=HISTORY):
+    """x (N, T, ...) -> (N, HISTORY, ...) ending at step t."""
+    start = jnp.maximum(t - axis_len + 1, 0)
+    return jax.lax.dynamic_slice_in_dim(x, start, axis_len, axis=1)
+
+
+def _object_mask(scene: BenchScene, t):
+    valid = scene.obj_valid[:, t]
+    return valid.at[0].set(False)  # the SDC's log slot is not an "other object"
+
+
+def metric_inputs(scene: BenchScene, state: BenchState) -> StepInputs:
+    t = state.t
+    boxes = jnp.concatenate([scene.obj_xy[:, t], scene.obj_size, scene.obj_yaw[:, t, None]], -1)
+    return StepInputs(
+        sdc_xy=state.sdc_xy[-3:], sdc_yaw=state.sdc_yaw[-3:], sdc_size=scene.obj_size[0],
+        sdc_log_xy=scene.obj_xy[0, t], object_boxes=boxes, object_vel=scene.obj_vel[:, t],
+        object_valid=_object_mask(scene, t), light_xy=scene.light_xy, light_lane_id=scene.light_lane_id,
+        light_state=scene.light_state, light_valid=scene.light_valid, path_xy=scene.path_xy,
+        path_valid=scene.path_valid, path_arc=scene.path_arc, path_on_route=scene.path_on_route,
+        path_log_arc=scene.path_log_arc)
+
+
+def observation_inputs(scene: BenchScene, state: BenchState) -> ObservationInputs:
+    t = state.t
+    valid = _window(scene.obj_valid, t) & _object_mask(scene, t)[:, None]
+    sdc_vel = jnp.concatenate([jnp.diff(state.sdc_xy, axis=0)[:1], jnp.diff(state.sdc_xy, axis=0)]) / 0.1
+    return ObservationInputs(
+        sdc_xy=state.sdc_xy, sdc_yaw=state.sdc_yaw, sdc_vel=sdc_vel, sdc_valid=jnp.ones(HISTORY, bool),
+        object_xy=_window(scene.obj_xy, t), object_yaw=_window(scene.obj_yaw, t), object_vel=_window(scene.obj_vel, t),
+        object_size=scene.obj_size, object_type=scene.obj_type, object_valid=valid, light_xy=scene.light_xy,
+        light_state=scene.light_state, light_valid=scene.light_valid, path_xy=scene.path_xy,
+        path_valid=scene.path_valid, path_arc=scene.path_arc, path_on_route=scene.path_on_route)
+
+
+def make_step_fn(with_observation: bool, with_metrics: bool, metrics_config: MetricsConfig | None = None,
+                 obs_config: ObservationConfig | None = None):
+    """One scene-step: env, then (optionally) metrics and observation sharing one candidate set."""
+    metrics_config = metrics_config or MetricsConfig()
+    obs_config = obs_config or ObservationConfig()
+
+    def step(scene: BenchScene, state: BenchState, action):
+        state = env_step(state, action)
+        out = jnp.zeros((), jnp.float32)
+        shared = None
+        if with_metrics:
+            inputs = metric_inputs(scene, state)
+            shared = shared_queries(inputs, metrics_config)
+            values = step_metrics(scene.map_index, inputs, metrics_config, shared)
+            out = out + sum(values.values())
+        if with_observation:
+            # the observation reuses the metrics' candidate objects and path projection
+            obs = observe(scene.map_index, observation_inputs(scene, state), obs_config,
+                          candidates=(shared.candidate_index, shared.candidate_valid) if shared else None,
+                          path_projection=shared.path_projection if shared else None)
+            out = out + jnp.sum(obs.objects) + jnp.sum(obs.roadgraph) + jnp.sum(obs.lights) + jnp.sum(obs.path_targets)
+        return state, out
+
+    return step
+
+
+def _time_config(scenes: BenchScene, step_fn, steps: int, repeats: int = 3) -> tuple[float, float]:
+    """(compile seconds, best scene-steps/s) of `steps` batched steps in a jitted scan."""
+    batch = jax.tree_util.tree_leaves(scenes)[0].shape[0]
+    action = jnp.tile(jnp.asarray([[0.2, 0.001]], jnp.float32), (batch, 1))
+
+    @jax.jit
+    def rollout(scenes, state):
+        def body(state, _):
+            state, out = jax.vmap(step_fn)(scenes, state, action)
+            return state, jnp.sum(out)
+        return jax.lax.scan(body, state, None, length=steps)
+
+    state = jax.vmap(initial_state)(scenes)
+    start = time.perf_counter()
+    compiled = rollout.lower(scenes, state).compile()
+    compile_s = time.perf_counter() - start
+    jax.block_until_ready(compiled(scenes, state))
+    best = np.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(compiled(scenes, state))
+        best = min(best, time.perf_counter() - start)
+    return compile_s, batch * steps / best
+
+
+def _batched_scenes(batch: int, num_objects: int, num_roadgraph: int, num_distinct: int = 4) -> BenchScene:
+    distinct = [make_scene(synthetic_scene(num_roadgraph, num_objects, seed)) for seed in range(min(batch, num_distinct))]
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack([xs[i % len(xs)] for i in range(batch)]), *distinct)
+
+
+CONFIGS = {"env": (False, False), "env+obs": (True, False), "env+metrics": (False, True),
+           "env+metrics+obs": (True, True)}
+
+
+def run_bench(batch_sizes=(1, 32, 256), num_objects: int = 64, roadgraph_sizes=(5000, 15000, 30000),
+              steps: int = 80, json: bool = False, configs=tuple(CONFIGS)) -> dict:
+    """Time every configuration at each batch size (largest roadgraph), then the full step at
+    each roadgraph size (batch 32 or the nearest given). Prints a table (or JSON) and returns
+    {"device", "configs": [...], "roadgraph_scaling": [...]}."""
+    device = f"{jax.devices()[0].platform}:{jax.devices()[0].device_kind}"
+    results = {"device": device, "num_objects": num_objects, "steps": steps, "configs": [], "roadgraph_scaling": []}
+    biggest = max(roadgraph_sizes)
+    for batch in batch_sizes:
+        scenes = _batched_scenes(batch, num_objects, biggest)
+        for name in configs:
+            compile_s, sps = _time_config(scenes, make_step_fn(*CONFIGS[name]), steps)
+            results["configs"].append({"config": name, "batch": batch, "roadgraph": biggest,
+                                       "compile_s": round(compile_s, 2), "scene_steps_per_s": round(sps)})
+    scaling_batch = min(batch_sizes, key=lambda b: abs(b - 32))
+    for size in roadgraph_sizes:
+        scenes = _batched_scenes(scaling_batch, num_objects, size)
+        compile_s, sps = _time_config(scenes, make_step_fn(True, True), steps)
+        results["roadgraph_scaling"].append({"config": "env+metrics+obs", "batch": scaling_batch, "roadgraph": size,
+                                             "compile_s": round(compile_s, 2), "scene_steps_per_s": round(sps)})
+    if json:
+        print(json_lib.dumps(results, indent=2))
+    else:
+        print(format_table(results))
+    return results
+
+
+def format_table(results: dict) -> str:
+    lines = [f"device: {results['device']}  objects: {results['num_objects']}  steps: {results['steps']}",
+             f"{'config':<18}{'batch':>6}{'roadgraph':>10}{'compile s':>10}{'scene-steps/s':>15}"]
+    for row in results["configs"] + results["roadgraph_scaling"]:
+        lines.append(f"{row['config']:<18}{row['batch']:>6}{row['roadgraph']:>10}{row['compile_s']:>10}"
+                     f"{row['scene_steps_per_s']:>15,}")
+    return "\n".join(lines)

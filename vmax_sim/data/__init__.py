@@ -1,0 +1,37 @@
+"""Loading scenariomax shards into fixed-shape, batched `SimulatorState`s."""
+
+from vmax_sim.data.config import DataConfig
+from vmax_sim.data.convert import (
+    build_map_index_for,
+    object_slots,
+    roadgraph_selection,
+    scenario_to_numpy_state,
+    scenario_to_state,
+    scenarios_to_batch,
+    stack_states,
+)
+from vmax_sim.data.loader import (
+    PrefetchIterator,
+    iter_numpy_batches,
+    iter_numpy_states,
+    iter_scenarios,
+    load_batch,
+    make_data_iterator,
+)
+
+__all__ = [
+    "DataConfig",
+    "PrefetchIterator",
+    "build_map_index_for",
+    "iter_numpy_batches",
+    "iter_numpy_states",
+    "iter_scenarios",
+    "load_batch",
+    "make_data_iterator",
+    "object_slots",
+    "roadgraph_selection",
+    "scenario_to_numpy_state",
+    "scenario_to_state",
+    "scenarios_to_batch",
+    "stack_states",
+]

@@ -1,0 +1,33 @@
+"""`DataConfig`: how shards become fixed-size simulator batches."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+
+@dataclasses.dataclass(frozen=True)
+class DataConfig:
+    path: str = ""  # shard directory, file or glob
+    batch_size: int = 1
+    num_objects: int = 64  # first slots of the record (the SDC is slot 0 in our shards)
+    num_roadgraph_points: int = 30000  # valid points nearest the SDC trajectory, then padding
+    num_paths: int = 10
+    num_points_per_path: int = 300
+    max_num_lights: int = 16
+    shuffle_seed: int | None = None  # None keeps file order (deterministic evaluation)
+    shuffle_buffer: int = 256  # scenarios held for shuffling
+    repeat: bool = False  # loop over the data forever (reshuffled each pass)
+    prefetch: int = 2  # batches prepared ahead by a background thread
+    num_workers: int = 0  # processes converting scenarios (map-index building is ~0.5 s each); 0: in the thread
+    drop_remainder: bool = True  # a final short batch would change shapes (and recompile)
+    include_map_index: bool = True  # build vmax_sim.map_index structures on the host
+    map_index_config: Any = None  # passed to vmax_sim.map_index.build_map_index (None: its default)
+
+    def __post_init__(self) -> None:
+        for name in ("batch_size", "num_objects", "num_roadgraph_points", "num_paths", "num_points_per_path",
+                     "max_num_lights"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"DataConfig.{name} must be at least 1, got {getattr(self, name)}")
+        if self.prefetch < 0 or self.shuffle_buffer < 0 or self.num_workers < 0:
+            raise ValueError("DataConfig.prefetch, shuffle_buffer and num_workers must not be negative")

@@ -1,0 +1,191 @@
+"""One `scenariomax.Scenario` -> one unbatched `SimulatorState` (numpy on the host, then device).
+
+All padding and cropping happens here so every state from one `DataConfig` has the same shapes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+import jax
+import numpy as np
+
+from scenariomax.enrich.budget import distance_to_polyline_points, sdc_positions
+from scenariomax.scenario import Scenario
+from scenariomax.sources.base import InputError
+from vmax_sim.data.config import DataConfig
+from vmax_sim.datatypes import (
+    ObjectMetadata,
+    Paths,
+    RoadgraphPoints,
+    SimulatorState,
+    TrafficLights,
+    Trajectory,
+)
+
+
+def _pad_first_axis(array: np.ndarray, size: int, fill) -> np.ndarray:
+    """Crops or pads axis 0 to `size`."""
+    array = array[:size]
+    if array.shape[0] == size:
+        return array
+    pad = np.full((size - array.shape[0],) + array.shape[1:], fill, dtype=array.dtype)
+    return np.concatenate([array, pad], axis=0)
+
+
+def _pad_axes(array: np.ndarray, shape: tuple[int, ...], fill) -> np.ndarray:
+    """Crops or pads every axis to `shape`."""
+    out = np.full(shape, fill, dtype=array.dtype)
+    cropped = array[tuple(slice(0, n) for n in shape)]
+    out[tuple(slice(0, n) for n in cropped.shape)] = cropped
+    return out
+
+
+def object_slots(scenario: Scenario, num_objects: int) -> np.ndarray:
+    """The first `num_objects` slots, with the SDC moved to slot 0 if it lies beyond them. (k,) int"""
+    sdc = scenario.sdc_index
+    slots = np.arange(min(num_objects, scenario.num_objects))
+    if sdc >= num_objects:
+        slots = np.concatenate([[sdc], slots[:-1]])
+    return slots
+
+
+def _trajectory(scenario: Scenario, slots: np.ndarray, num_objects: int) -> Trajectory:
+    valid = scenario.valid[slots]
+
+    def take(values: np.ndarray, dtype, fill) -> np.ndarray:
+        kept = np.where(valid, values[slots], fill).astype(dtype)
+        return _pad_first_axis(kept, num_objects, fill)
+
+    return Trajectory(
+        x=take(scenario.x, np.float32, 0), y=take(scenario.y, np.float32, 0), z=take(scenario.z, np.float32, 0),
+        vel_x=take(scenario.velocity_x, np.float32, 0), vel_y=take(scenario.velocity_y, np.float32, 0),
+        yaw=take(scenario.bbox_yaw, np.float32, 0), length=take(scenario.length, np.float32, 0),
+        width=take(scenario.width, np.float32, 0), height=take(scenario.height, np.float32, 0),
+        valid=_pad_first_axis(valid, num_objects, False),
+        timestamp_micros=take(scenario.timestamp_micros, np.int32, -1),
+    )
+
+
+def _metadata(scenario: Scenario, slots: np.ndarray, num_objects: int) -> ObjectMetadata:
+    def take(values: np.ndarray, dtype, fill) -> np.ndarray:
+        return _pad_first_axis(values[slots].astype(dtype), num_objects, fill)
+
+    is_sdc = take(scenario.is_sdc, bool, False)
+    return ObjectMetadata(
+        ids=take(scenario.object_id, np.int32, -1), object_types=take(scenario.object_type, np.int32, 0),
+        is_sdc=is_sdc, is_controlled=is_sdc.copy(), is_controllable=take(scenario.is_controllable, bool, False),
+        is_valid=take(scenario.valid.any(axis=1), bool, False),
+        objects_of_interest=take(scenario.objects_of_interest, bool, False),
+    )
+
+
+def roadgraph_selection(scenario: Scenario, num_points: int) -> np.ndarray:
+    """Indices of the valid roadgraph points kept (nearest the SDC trajectory), in map order. (k,) int"""
+    kept = np.flatnonzero(scenario.roadgraph_valid)
+    if kept.size <= num_points:
+        return kept
+    anchors = sdc_positions(scenario)[::5]
+    dist = distance_to_polyline_points(scenario.roadgraph_xyz[kept, :2].astype(np.float64), anchors)
+    return np.sort(kept[np.argpartition(dist, num_points - 1)[:num_points]])
+
+
+def _roadgraph(scenario: Scenario, num_points: int) -> RoadgraphPoints:
+    keep = roadgraph_selection(scenario, num_points)
+
+    def take(values: np.ndarray, dtype, fill) -> np.ndarray:
+        return _pad_first_axis(values[keep].astype(dtype), num_points, fill)
+
+    xyz, direction = scenario.roadgraph_xyz, scenario.roadgraph_dir
+    return RoadgraphPoints(
+        x=take(xyz[:, 0], np.float32, 0), y=take(xyz[:, 1], np.float32, 0), z=take(xyz[:, 2], np.float32, 0),
+        dir_x=take(direction[:, 0], np.float32, 0), dir_y=take(direction[:, 1], np.float32, 0),
+        dir_z=take(direction[:, 2], np.float32, 0), types=take(scenario.roadgraph_type, np.int32, 0),
+        ids=take(scenario.roadgraph_id, np.int32, -1), valid=take(scenario.roadgraph_valid, bool, False),
+        speed_limit=take(scenario.roadgraph_speed_limit, np.float32, -1),
+    )
+
+
+def _traffic_lights(scenario: Scenario, num_lights: int) -> TrafficLights:
+    keep = np.flatnonzero(scenario.tl_valid.any(axis=1))[:num_lights]  # lights seen at least once
+    valid = scenario.tl_valid[keep]
+
+    def take(values: np.ndarray, dtype, fill) -> np.ndarray:
+        return _pad_first_axis(np.where(valid, values[keep], fill).astype(dtype), num_lights, fill)
+
+    return TrafficLights(
+        x=take(scenario.tl_x, np.float32, 0), y=take(scenario.tl_y, np.float32, 0),
+        z=take(scenario.tl_z, np.float32, 0), state=take(scenario.tl_state, np.int32, 0),
+        lane_ids=take(scenario.tl_lane_id, np.int32, -1), valid=_pad_first_axis(valid, num_lights, False),
+    )
+
+
+def _paths(scenario: Scenario, num_paths: int, num_points: int) -> Paths:
+    shape = (num_paths, num_points)
+    valid = _pad_axes(scenario.path_valid, shape, False)
+
+    def take(values: np.ndarray, dtype, fill) -> np.ndarray:
+        return np.where(valid, _pad_axes(values.astype(dtype), shape, fill), fill).astype(dtype)
+
+    xyz = scenario.path_xyz
+    return Paths(
+        x=take(xyz[..., 0], np.float32, 0), y=take(xyz[..., 1], np.float32, 0), z=take(xyz[..., 2], np.float32, 0),
+        ids=take(scenario.path_lane_id, np.int32, -1), valid=valid,
+        arc_length=take(scenario.path_arc_length, np.float32, 0),
+        on_route=_pad_first_axis(scenario.path_on_route.astype(bool), num_paths, False),
+    )
+
+
+def build_map_index_for(roadgraph: RoadgraphPoints, center_xy: np.ndarray, config: DataConfig):
+    """The map index of one roadgraph, centred on `center_xy` (2,) (numpy, host).
+
+    The one place that imports vmax_sim.map_index (part of the simulator, built alongside).
+    """
+    from vmax_sim.map_index import build_map_index
+
+    xyz = np.stack([roadgraph.x, roadgraph.y, roadgraph.z], axis=-1)
+    direction = np.stack([roadgraph.dir_x, roadgraph.dir_y, roadgraph.dir_z], axis=-1)
+    return build_map_index(xyz, direction, roadgraph.types, roadgraph.ids, roadgraph.valid,
+                           config.map_index_config, center_xy=center_xy, speed_limit=roadgraph.speed_limit)
+
+
+def scenario_to_numpy_state(scenario: Scenario, config: DataConfig) -> SimulatorState:
+    """Host-side conversion: a SimulatorState of numpy arrays, timestep at the scenario's current step."""
+    try:
+        sdc = scenario.sdc_index
+    except ValueError as error:
+        raise InputError(f"scenario {scenario.scenario_id}: {error}") from None
+    if not scenario.valid[sdc, scenario.current_time_index]:
+        raise InputError(f"scenario {scenario.scenario_id}: the SDC is not valid at the current step")
+    slots = object_slots(scenario, config.num_objects)
+    log = _trajectory(scenario, slots, config.num_objects)
+    roadgraph = _roadgraph(scenario, config.num_roadgraph_points)
+    now = scenario.current_time_index
+    sdc_xy = np.array([scenario.x[sdc, now], scenario.y[sdc, now]], np.float64)
+    return SimulatorState(
+        log_trajectory=log,
+        sim_trajectory=log,
+        object_metadata=_metadata(scenario, slots, config.num_objects),
+        roadgraph_points=roadgraph,
+        log_traffic_light=_traffic_lights(scenario, config.max_num_lights),
+        sdc_paths=_paths(scenario, config.num_paths, config.num_points_per_path),
+        map_index=build_map_index_for(roadgraph, sdc_xy, config) if config.include_map_index else None,
+        timestep=np.asarray(scenario.current_time_index, np.int32),
+    )
+
+
+def scenario_to_state(scenario: Scenario, config: DataConfig) -> SimulatorState:
+    """One scenario as an unbatched SimulatorState on the default device."""
+    return jax.device_put(scenario_to_numpy_state(scenario, config))
+
+
+def stack_states(states: Sequence[SimulatorState]) -> SimulatorState:
+    """Stacks unbatched states (numpy or jax) on a new leading batch axis (numpy result)."""
+    if not states:
+        raise ValueError("cannot stack an empty list of states")
+    return jax.tree.map(lambda *leaves: np.stack([np.asarray(leaf) for leaf in leaves]), *states)
+
+
+def scenarios_to_batch(scenarios: Iterable[Scenario], config: DataConfig) -> SimulatorState:
+    """A fixed list of scenarios as one batch (leading axis = number of scenarios), on device."""
+    return jax.device_put(stack_states([scenario_to_numpy_state(s, config) for s in scenarios]))

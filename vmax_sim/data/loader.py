@@ -1,0 +1,183 @@
+"""`make_data_iterator`: shards -> shuffled, repeated, batched SimulatorStates, prefetched on a thread.
+
+Host work (decoding, cropping, map-index building) runs in a background thread that keeps
+`prefetch` device batches ready, so the jitted simulator does not wait for the data.
+"""
+
+from __future__ import annotations
+
+import collections
+import multiprocessing
+import queue
+import threading
+from collections.abc import Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from scenariomax.scenario import Scenario
+from scenariomax.shards import list_shard_files, read_shards
+from scenariomax.sources.base import InputError
+from vmax_sim.data.config import DataConfig
+from vmax_sim.data.convert import scenario_to_numpy_state, stack_states
+from vmax_sim.datatypes import SimulatorState
+
+_END = object()
+
+
+def _shard_files(path: str) -> list[Path]:
+    try:
+        return list_shard_files(path)
+    except FileNotFoundError as error:
+        raise InputError(str(error)) from None
+
+
+def _scenarios_once(files: list[Path], rng: np.random.Generator | None) -> Iterator[Scenario]:
+    order = rng.permutation(len(files)) if rng is not None else range(len(files))
+    for index in order:
+        yield from read_shards(files[index])
+
+
+def _shuffled(scenarios: Iterable[Scenario], rng: np.random.Generator, buffer_size: int) -> Iterator[Scenario]:
+    """Reservoir-style shuffle buffer: memory is `buffer_size` scenarios, whatever the data size."""
+    buffer: list[Scenario] = []
+    for scenario in scenarios:
+        if len(buffer) < buffer_size:
+            buffer.append(scenario)
+            continue
+        slot = int(rng.integers(buffer_size))
+        yield buffer[slot]
+        buffer[slot] = scenario
+    for slot in rng.permutation(len(buffer)):
+        yield buffer[slot]
+
+
+def iter_scenarios(config: DataConfig) -> Iterator[Scenario]:
+    """Scenarios in the order batches use them: seeded shuffle per pass, repeated when asked."""
+    files = _shard_files(config.path)
+    rng = np.random.default_rng(config.shuffle_seed) if config.shuffle_seed is not None else None
+    while True:
+        count = 0
+        stream = _scenarios_once(files, rng)
+        if rng is not None and config.shuffle_buffer > 1:
+            stream = _shuffled(stream, rng, config.shuffle_buffer)
+        for scenario in stream:
+            count += 1
+            yield scenario
+        if count == 0:
+            raise InputError(f"{config.path}: the shard files hold no scenarios")
+        if not config.repeat:
+            return
+
+
+def iter_numpy_states(config: DataConfig) -> Iterator[SimulatorState]:
+    """Unbatched host states in scenario order, converted by `num_workers` processes when > 0."""
+    if config.num_workers == 0:
+        for scenario in iter_scenarios(config):
+            yield scenario_to_numpy_state(scenario, config)
+        return
+    # spawn, not fork: the parent has JAX (and its threads) running.
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(config.num_workers, mp_context=context) as pool:
+        in_flight: collections.deque = collections.deque()
+        for scenario in iter_scenarios(config):
+            in_flight.append(pool.submit(scenario_to_numpy_state, scenario, config))
+            if len(in_flight) >= 2 * config.num_workers + config.batch_size:
+                yield in_flight.popleft().result()
+        while in_flight:
+            yield in_flight.popleft().result()
+
+
+def iter_numpy_batches(config: DataConfig) -> Iterator[SimulatorState]:
+    """Batches of host (numpy) states with leading axis `batch_size`."""
+    pending: list[SimulatorState] = []
+    for state in iter_numpy_states(config):
+        pending.append(state)
+        if len(pending) == config.batch_size:
+            yield stack_states(pending)
+            pending = []
+    if pending and not config.drop_remainder:
+        yield stack_states(pending)
+
+
+class PrefetchIterator:
+    """Runs a batch generator on a daemon thread, `capacity` device batches ahead. Errors re-raise here."""
+
+    def __init__(self, batches: Iterator[SimulatorState], capacity: int):
+        self._queue: queue.Queue = queue.Queue(maxsize=max(capacity, 1))
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._fill, args=(batches,), daemon=True)
+        self._thread.start()
+
+    def _put(self, item) -> bool:
+        while not self._stop.is_set():
+            try:
+                self._queue.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _fill(self, batches: Iterator[SimulatorState]) -> None:
+        try:
+            for batch in batches:
+                if not self._put(jax.device_put(batch)):
+                    return
+            self._put(_END)
+        except Exception as error:  # noqa: BLE001 -- handed to the consumer, which re-raises it
+            self._put(error)
+
+    def _get(self):
+        while True:
+            try:
+                return self._queue.get(timeout=1.0)
+            except queue.Empty:
+                if not self._thread.is_alive() and self._queue.empty():  # died without a word
+                    self._stop.set()
+                    raise RuntimeError("the data loader thread stopped unexpectedly") from None
+
+    def __iter__(self) -> PrefetchIterator:
+        return self
+
+    def __next__(self) -> SimulatorState:
+        if self._stop.is_set():
+            raise StopIteration
+        item = self._get()
+        if item is _END:
+            self._stop.set()
+            raise StopIteration
+        if isinstance(item, Exception):
+            self._stop.set()
+            raise item
+        return item
+
+    def close(self) -> None:
+        """Stops the background thread (it exits at its next queue operation)."""
+        self._stop.set()
+
+    def __del__(self) -> None:
+        self._stop.set()
+
+
+def make_data_iterator(config: DataConfig) -> Iterator[SimulatorState]:
+    """Device batches of SimulatorState, shape (batch_size, ...), prefetched in the background."""
+    _shard_files(config.path)  # fail fast, in the caller's thread, on a wrong path
+    batches = iter_numpy_batches(config)
+    if config.prefetch == 0:
+        return (jax.device_put(batch) for batch in batches)
+    return PrefetchIterator(batches, config.prefetch)
+
+
+def load_batch(config: DataConfig, num_scenarios: int | None = None) -> SimulatorState:
+    """The first `num_scenarios` scenarios of `config.path` (all when None) as one device batch."""
+    states = []
+    _shard_files(config.path)
+    for scenario in read_shards(config.path):
+        if num_scenarios is not None and len(states) >= num_scenarios:
+            break
+        states.append(scenario_to_numpy_state(scenario, config))
+    if not states:
+        raise InputError(f"{config.path}: the shard files hold no scenarios")
+    return jax.device_put(stack_states(states))

@@ -1,0 +1,70 @@
+"""`SimulatorState`: everything the simulator carries for one scenario (or a batch of them)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from vmax_sim.datatypes.object_metadata import ObjectMetadata
+from vmax_sim.datatypes.paths import Paths
+from vmax_sim.datatypes.roadgraph import RoadgraphPoints
+from vmax_sim.datatypes.traffic_lights import TrafficLights
+from vmax_sim.datatypes.trajectory import Trajectory, select_timestep
+
+
+@struct.dataclass
+class SimulatorState:
+    log_trajectory: Trajectory  # (..., num_objects, num_timesteps), the recorded log
+    sim_trajectory: Trajectory  # (..., num_objects, num_timesteps), simulated so far (valid up to timestep)
+    object_metadata: ObjectMetadata  # (..., num_objects)
+    roadgraph_points: RoadgraphPoints  # (..., num_points)
+    log_traffic_light: TrafficLights  # (..., num_lights, num_timesteps)
+    sdc_paths: Paths  # (..., num_paths, num_points_per_path)
+    map_index: Any  # vmax_sim.map_index.MapIndex with leading (...) dims, or None when not built
+    timestep: jax.Array  # (...) int32, index of the current step in [0, num_timesteps)
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        return tuple(self.timestep.shape)
+
+    @property
+    def num_objects(self) -> int:
+        return self.log_trajectory.num_objects
+
+    @property
+    def num_timesteps(self) -> int:
+        return self.log_trajectory.num_timesteps
+
+    @property
+    def current_sim_trajectory(self) -> Trajectory:
+        """Simulated state at the current step. (..., num_objects, 1)"""
+        return select_timestep(self.sim_trajectory, self.timestep)
+
+    @property
+    def current_log_trajectory(self) -> Trajectory:
+        """Logged state at the current step. (..., num_objects, 1)"""
+        return select_timestep(self.log_trajectory, self.timestep)
+
+    @property
+    def next_log_trajectory(self) -> Trajectory:
+        """Logged state one step ahead (clamped at the last step). (..., num_objects, 1)"""
+        last = self.num_timesteps - 1
+        return select_timestep(self.log_trajectory, jnp.minimum(self.timestep + 1, last))
+
+    @property
+    def current_traffic_lights(self) -> TrafficLights:
+        """Logged traffic lights at the current step. (..., num_lights, 1)"""
+        return select_timestep(self.log_traffic_light, self.timestep)
+
+    @property
+    def remaining_timesteps(self) -> jax.Array:
+        """Steps left in the log. (...) int32"""
+        return jnp.maximum(self.num_timesteps - 1 - self.timestep, 0)
+
+    @property
+    def is_done(self) -> jax.Array:
+        """The log has no further step. (...) bool"""
+        return self.timestep >= self.num_timesteps - 1

@@ -1,0 +1,115 @@
+"""`Environment`: pure reset/step over `SimulatorState`, with injected dynamics and termination.
+
+Controlled objects move by the dynamics model; every other object replays the log
+(non-reactive). The environment holds only static configuration, so its methods can be jitted,
+vmapped and scanned freely. reset/step/is_* accept any leading batch dims; `BatchedEnvironment`
+gives the same results through `vmap`.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from vmax_sim.datatypes import Action, SimulatorState, Trajectory, fill_invalid, update_timestep
+from vmax_sim.dynamics import DynamicsModel, get_dynamics
+from vmax_sim.env.config import EnvConfig
+from vmax_sim.env.termination import TerminationFn
+
+
+def controlled_mask(config: EnvConfig, state: SimulatorState) -> jax.Array:
+    """Which objects the policy drives under `config.controlled`. (..., num_objects) bool"""
+    meta = state.object_metadata
+    if config.controlled == "sdc":
+        return meta.is_sdc
+    if config.controlled == "controllable":
+        return meta.is_sdc | meta.is_controllable
+    return jnp.broadcast_to(jnp.asarray(config.controlled, bool), meta.is_sdc.shape)
+
+
+def _check_shapes(config: EnvConfig, state: SimulatorState) -> None:
+    if state.num_objects != config.max_num_objects:
+        raise ValueError(f"state has {state.num_objects} objects but EnvConfig.max_num_objects is "
+                         f"{config.max_num_objects}; load with DataConfig(num_objects={config.max_num_objects})")
+    if config.last_timestep > state.num_timesteps - 1:
+        raise ValueError(f"init_steps + episode_length = {config.init_steps + config.episode_length} exceeds the "
+                         f"log's {state.num_timesteps} steps")
+
+
+def merge_next_state(current: Trajectory, predicted: Trajectory, next_log: Trajectory, is_controlled: jax.Array,
+                     action_valid: jax.Array) -> Trajectory:
+    """Next object states: dynamics for controlled objects present now, the log for everyone else.
+
+    current, predicted, next_log (..., N, 1); is_controlled (..., N); action_valid (..., N, 1).
+    A controlled object given an invalid action becomes invalid; a controlled object not yet
+    present follows the log until it appears.
+    """
+    is_driven = is_controlled[..., None] & current.valid
+    predicted = predicted.replace(valid=current.valid & action_valid)
+    return jax.tree.map(lambda p, log: jnp.where(is_driven, p, log), predicted, next_log)
+
+
+class Environment:
+    """Single-scenario environment (any leading batch dims work; see BatchedEnvironment for vmap)."""
+
+    def __init__(self, config: EnvConfig | None = None, termination_fn: TerminationFn | None = None,
+                 dynamics: DynamicsModel | None = None):
+        self.config = config or EnvConfig()
+        self.dynamics = dynamics or get_dynamics(self.config.dynamics)
+        self.termination_fn = termination_fn
+
+    @property
+    def action_dim(self) -> int:
+        return self.dynamics.action_dim
+
+    def reset(self, state: SimulatorState, key: jax.Array | None = None) -> SimulatorState:
+        """Starts an episode: the first init_steps come from the log, timestep = init_steps - 1.
+
+        `key` is accepted for API symmetry (reset is deterministic).
+        """
+        del key
+        _check_shapes(self.config, state)
+        first = self.config.first_policy_timestep
+        timestep = jnp.full(state.batch_shape, first, jnp.int32)
+        is_past = jnp.arange(state.num_timesteps) <= timestep[..., None, None]  # (..., 1, T)
+        return state.replace(
+            sim_trajectory=fill_invalid(state.log_trajectory, is_past),
+            object_metadata=state.object_metadata.replace(is_controlled=controlled_mask(self.config, state)),
+            timestep=timestep,
+        )
+
+    def step(self, state: SimulatorState, action: Action) -> SimulatorState:
+        """Advances one step. action.data (..., N, action_dim) in the env's convention (see normalize_actions)."""
+        data = action.data.astype(jnp.float32)
+        if self.config.normalize_actions:
+            data = self.dynamics.denormalize(data)
+        current = state.current_sim_trajectory
+        predicted = self.dynamics.forward(data, current)
+        new = merge_next_state(current, predicted, state.next_log_trajectory,
+                               state.object_metadata.is_controlled, action.valid)
+        next_timestep = jnp.minimum(state.timestep + 1, state.num_timesteps - 1).astype(jnp.int32)
+        return state.replace(sim_trajectory=update_timestep(state.sim_trajectory, next_timestep, new),
+                             timestep=next_timestep)
+
+    def is_terminated(self, state: SimulatorState) -> jax.Array:
+        """The injected termination predicate (False without one). (...) bool"""
+        if self.termination_fn is None:
+            return jnp.zeros(state.batch_shape, bool)
+        return jnp.asarray(self.termination_fn(state), bool)
+
+    def is_truncated(self, state: SimulatorState) -> jax.Array:
+        """The episode reached its length (or the end of the log). (...) bool"""
+        return (state.timestep >= self.config.last_timestep) | state.is_done
+
+    def is_done(self, state: SimulatorState) -> jax.Array:
+        """(...) bool"""
+        return self.is_terminated(state) | self.is_truncated(state)
+
+    def expert_action(self, state: SimulatorState) -> Action:
+        """Log-following action in this env's convention (normalised when normalize_actions)."""
+        from vmax_sim.env.expert import expert_actions
+
+        action = expert_actions(state, self.dynamics)
+        if self.config.normalize_actions:
+            action = action.replace(data=self.dynamics.normalize(action.data))
+        return action

@@ -1,0 +1,547 @@
+"""Per-scenario map acceleration structure: built once on the host, queried per step in JAX.
+
+The peers check every box corner against every roadgraph point each step, so their step cost
+grows with the map. Here the host (numpy, once per scenario) turns the roadgraph into
+
+- a capped list of segments (consecutive points of one polyline, straight runs merged up to one
+  cell long), with type, id and speed limit;
+- two uniform grids centred on `center_xy` (normally the SDC at the current step) whose cells list
+  up to `slots_per_cell` segment indices (-1 pads): one for road edges, one for lane centres;
+- a per-cell fallback signed distance to the nearest road edge (for cells with no edge nearby);
+- a coarse grid of thinned sample points (edges, lanes, lines) for the observation.
+
+Every array's shape depends only on `MapIndexConfig`, never on the roadgraph size R, so per-step
+queries touch a fixed, small window of cells whatever the map size.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import flax.struct
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from scenariomax.schema import LANE_TYPES, ROAD_EDGE_TYPES, ROAD_LINE_TYPES
+from scenariomax.sources.base import InputError
+
+FAR_DISTANCE = 1e4  # metres, stands for "no feature in reach"
+
+
+@dataclasses.dataclass(frozen=True)
+class MapIndexConfig:
+    """Sizes of the map index. Region covered = cell_size * grid_size metres per side."""
+
+    cell_size: float = 8.0  # metres per segment-grid cell; also the longest merged segment
+    grid_size: int = 64  # cells per side (64 x 8 m = 512 m)
+    slots_per_cell: int = 16  # lane segments per cell; overflow keeps those nearest the cell centre
+    edge_slots_per_cell: int = 8  # road-edge segments per cell (edges are sparser than lanes)
+    max_segments: int = 4096  # S: segments kept, nearest the grid centre first
+    query_window: int = 3  # cells per side looked at around a query point (odd: 3 -> 3x3)
+    merge_angle_deg: float = 2.0  # straight runs whose heading changes less are merged
+    edge_types: tuple[int, ...] = ROAD_EDGE_TYPES  # offroad queries
+    lane_types: tuple[int, ...] = LANE_TYPES  # lane / route queries
+    obs_types: tuple[int, ...] = ROAD_EDGE_TYPES + LANE_TYPES + ROAD_LINE_TYPES  # observation points
+    obs_cell_size: float = 16.0  # metres per observation-grid cell
+    obs_grid_size: int = 32  # cells per side (32 x 16 m = 512 m)
+    obs_slots_per_cell: int = 8  # thinned points per observation cell
+    obs_spacing: float = 2.0  # metres between observation points along a polyline
+    max_link_gap: float = 5.0  # consecutive points further apart are not joined into a segment
+
+    def __post_init__(self):
+        if self.query_window % 2 != 1:
+            raise ValueError(f"MapIndexConfig.query_window must be odd, got {self.query_window}")
+
+
+@flax.struct.dataclass
+class MapIndex:
+    """Fixed-shape map acceleration structure of one scenario (batch it with leading dims)."""
+
+    seg_start: jnp.ndarray  # (S, 2) float32, segment start points
+    seg_end: jnp.ndarray  # (S, 2) float32, segment end points
+    seg_type: jnp.ndarray  # (S,) int32, roadgraph type
+    seg_id: jnp.ndarray  # (S,) int32, polyline (lane) id
+    seg_speed_limit: jnp.ndarray  # (S,) float32, m/s, -1 unknown
+    seg_valid: jnp.ndarray  # (S,) bool
+    origin_xy: jnp.ndarray  # (2,) float32, lower-left corner of both grids
+    edge_cells: jnp.ndarray  # (G, G, Ce) int32, road-edge segment indices, -1 pads
+    lane_cells: jnp.ndarray  # (G, G, C) int32, lane-centre segment indices, -1 pads
+    # dense per-cell copies (structure of arrays) so a query is one contiguous block slice and the
+    # maths runs on unit-stride float vectors instead of gathers and size-2 minor axes
+    edge_seg: jnp.ndarray  # (4, G, G, Ce) float32, [start x, start y, end x, end y] per slot
+    lane_seg: jnp.ndarray  # (4, G, G, C) float32, same for lane centres
+    lane_seg_id: jnp.ndarray  # (G, G, C) int32, lane id per slot (-1 empty)
+    lane_seg_speed_limit: jnp.ndarray  # (G, G, C) float32, m/s, -1 unknown
+    cell_edge_distance: jnp.ndarray  # (G, G) float32, signed distance of cell centres to nearest edge
+    obs_points: jnp.ndarray  # (4, Go, Go, Co) float32, [x, y, dir x, dir y] of observation points
+    obs_type: jnp.ndarray  # (Go, Go, Co) int32
+    obs_speed_limit: jnp.ndarray  # (Go, Go, Co) float32, m/s, -1 unknown
+    obs_valid: jnp.ndarray  # (Go, Go, Co) bool
+    num_dropped: jnp.ndarray  # () int32, segments lost to the S cap or full cells (diagnostics)
+    cell_size: float = flax.struct.field(pytree_node=False, default=8.0)  # static, metres
+    obs_cell_size: float = flax.struct.field(pytree_node=False, default=16.0)  # static, metres
+    query_window: int = flax.struct.field(pytree_node=False, default=3)  # static, cells per side
+
+
+# ----------------------------------------------------------------------------- host-side build
+
+
+def _segments(xyz, types, ids, valid, speed_limit, keep_types, config):
+    """Merged segments of the polylines whose type is in keep_types. numpy -> (start, end, type, id, limit)."""
+    r = len(xyz)
+    if r < 2:
+        empty = np.zeros((0, 2))
+        return empty, empty, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+    selected = valid & np.isin(types, keep_types)
+    xy = xyz[:, :2].astype(np.float64)
+    nxt = np.minimum(np.arange(1, r + 1), r - 1)
+    gap = np.linalg.norm(xy[nxt] - xy, axis=1)
+    linked = (selected & selected[nxt] & (ids == ids[nxt]) & (types == types[nxt])
+              & (np.arange(r) < r - 1) & (gap > 1e-6) & (gap <= config.max_link_gap))
+    prev_linked = np.concatenate([[False], linked[:-1]])
+    heading = np.arctan2(xy[nxt, 1] - xy[:, 1], xy[nxt, 0] - xy[:, 0])
+    turn = np.abs((heading - np.concatenate([heading[:1], heading[:-1]]) + np.pi) % (2 * np.pi) - np.pi)
+    # interior points of straight runs are merged away; runs are cut so segments stay short
+    straight = prev_linked & linked & (turn < np.deg2rad(config.merge_angle_deg))
+    arc = np.concatenate([[0.0], np.cumsum((gap * linked)[:-1])])
+    last_vertex_arc = np.maximum.accumulate(np.where(~straight, arc, -np.inf))
+    chunk = np.floor((arc - last_vertex_arc) / max(config.cell_size - 1.0, 1.0)).astype(np.int64)
+    new_chunk = straight & (chunk != np.concatenate([[0], chunk[:-1]]))
+    vertex_idx = np.flatnonzero(selected & (~straight | new_chunk))
+    a, b = vertex_idx[:-1], vertex_idx[1:]
+    # (a, b) is a segment when every point from a up to b is linked to its successor
+    linked_count = np.concatenate([[0], np.cumsum(linked)])
+    joined = (linked_count[b] - linked_count[a]) == (b - a)
+    a, b = a[joined], b[joined]
+    return xy[a], xy[b], types[a], ids[a], speed_limit[a]
+
+
+def _fill_cells(cells_of_item, priority, num_cells, slots):
+    """Scatter item indices into (num_cells, slots) keeping the lowest priority first. -> (cells, dropped)."""
+    item, cell = cells_of_item
+    table = np.full((num_cells, slots), -1, np.int32)
+    if len(item) == 0:
+        return table, 0
+    order = np.lexsort((priority, cell))
+    item, cell = item[order], cell[order]
+    first = np.searchsorted(cell, cell, side="left")
+    rank = np.arange(len(cell)) - first
+    keep = rank < slots
+    table[cell[keep], rank[keep]] = item[keep]
+    return table, int(np.count_nonzero(~keep))
+
+
+def _segment_cells(start, end, origin, config):
+    """(segment, flat cell) pairs for every grid cell a segment's bounding box touches."""
+    g, cs = config.grid_size, config.cell_size
+    lo = np.floor((np.minimum(start, end) - origin) / cs).astype(np.int64)
+    hi = np.floor((np.maximum(start, end) - origin) / cs).astype(np.int64)
+    items, cells = [], []
+    for dx in range(3):  # segments are at most ~1.5 cells long: their box spans <= 3x3 cells
+        for dy in range(3):
+            cx, cy = lo[:, 0] + dx, lo[:, 1] + dy
+            ok = (cx <= hi[:, 0]) & (cy <= hi[:, 1]) & (cx >= 0) & (cy >= 0) & (cx < g) & (cy < g)
+            items.append(np.flatnonzero(ok))
+            cells.append(cx[ok] * g + cy[ok])
+    return np.concatenate(items), np.concatenate(cells)
+
+
+def _edge_distance_field(start, end, origin, config):
+    """Signed distance of every cell centre to its nearest road edge (+ = off road). -> (G, G)."""
+    g, cs = config.grid_size, config.cell_size
+    if len(start) == 0:
+        return np.full((g, g), -FAR_DISTANCE, np.float32)
+    centres = origin + (np.stack(np.meshgrid(np.arange(g), np.arange(g), indexing="ij"), -1) + 0.5) * cs
+    pts = centres.reshape(-1, 1, 2)
+    best_dist = np.full(len(pts), np.inf)
+    best_side = np.zeros(len(pts))
+    for lo in range(0, len(start), 512):  # chunks bound the host memory
+        s, e = start[lo:lo + 512][None], end[lo:lo + 512][None]
+        seg = e - s
+        t = np.clip(np.sum((pts - s) * seg, -1) / np.maximum(np.sum(seg * seg, -1), 1e-12), 0, 1)
+        dist = np.linalg.norm(pts - (s + t[..., None] * seg), axis=-1)
+        side = seg[..., 0] * (pts - s)[..., 1] - seg[..., 1] * (pts - s)[..., 0]
+        arg = np.argmin(dist, axis=1)
+        chunk_best = dist[np.arange(len(pts)), arg]
+        better = chunk_best < best_dist
+        best_dist = np.where(better, chunk_best, best_dist)
+        best_side = np.where(better, side[np.arange(len(pts)), arg], best_side)
+    signed = np.where(best_side < 0, best_dist, -best_dist)
+    return signed.reshape(g, g).astype(np.float32)
+
+
+def _obs_points(xyz, dirs, types, ids, valid, speed_limit, origin, config):
+    """Thinned observation points scattered into the observation grid."""
+    go, co = config.obs_grid_size, config.obs_slots_per_cell
+    selected = valid & np.isin(types, config.obs_types)
+    idx = np.flatnonzero(selected)
+    xy = xyz[idx, :2].astype(np.float64)
+    # arc length along each polyline, restarting where the id changes; keep one point per spacing
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=1) if len(xy) else np.zeros(0)
+    same = ids[idx][1:] == ids[idx][:-1] if len(xy) else np.zeros(0, bool)
+    step = np.where(same, np.minimum(step, config.max_link_gap), 0.0)
+    arc = np.concatenate([[0.0], np.cumsum(step)]) if len(xy) else np.zeros(0)
+    bucket = np.floor(arc / config.obs_spacing).astype(np.int64)
+    first_in_bucket = np.concatenate([[True], (bucket[1:] != bucket[:-1]) | ~same]) if len(xy) else bucket.astype(bool)
+    idx, xy = idx[first_in_bucket], xy[first_in_bucket]
+    cell = np.floor((xy - origin) / config.obs_cell_size).astype(np.int64)
+    inside = np.all((cell >= 0) & (cell < go), axis=1)
+    idx, cell = idx[inside], cell[inside]
+    flat = cell[:, 0] * go + cell[:, 1]
+    order = np.argsort(flat, kind="stable")  # keep polyline order within a cell so thinning is even
+    idx, flat = idx[order], flat[order]
+    first = np.searchsorted(flat, flat, side="left")
+    count = np.searchsorted(flat, flat, side="right") - first
+    rank = np.arange(len(flat)) - first
+    slot = np.where(count > co, (rank * co) // np.maximum(count, 1), rank)
+    prev_slot = np.where(count > co, ((rank - 1) * co) // np.maximum(count, 1), rank - 1)
+    keep = (rank == 0) | (slot != prev_slot)
+    idx, flat, slot = idx[keep], flat[keep], slot[keep]
+    out_xy = np.zeros((go * go, co, 2), np.float32)
+    out_dir = np.zeros((go * go, co, 2), np.float32)
+    out_type = np.zeros((go * go, co), np.int32)
+    out_limit = np.full((go * go, co), -1.0, np.float32)
+    out_valid = np.zeros((go * go, co), bool)
+    out_xy[flat, slot] = xyz[idx, :2]
+    out_dir[flat, slot] = dirs[idx, :2]
+    out_type[flat, slot] = types[idx]
+    out_limit[flat, slot] = speed_limit[idx]
+    out_valid[flat, slot] = True
+    shape = (go, go, co)
+    return (out_xy.reshape(shape + (2,)), out_dir.reshape(shape + (2,)), out_type.reshape(shape),
+            out_limit.reshape(shape), out_valid.reshape(shape))
+
+
+def build_map_index(xyz: np.ndarray, dir: np.ndarray, types: np.ndarray, ids: np.ndarray,
+                    valid: np.ndarray, config: MapIndexConfig | None = None,
+                    center_xy: np.ndarray | None = None, *,
+                    speed_limit: np.ndarray | None = None) -> MapIndex:
+    """Build the map index of one scenario on the host (numpy, once per scenario).
+
+    xyz (R, 3), dir (R, 3), types (R,), ids (R,), valid (R,) are the roadgraph arrays of a shard;
+    speed_limit (R,) m/s (-1 unknown) is optional. Both grids are centred on `center_xy` (2,)
+    (default: mean of the valid points; pass the SDC position at the current step).
+    """
+    config = config or MapIndexConfig()
+    xyz = np.asarray(xyz, np.float32)
+    if xyz.ndim != 2 or xyz.shape[1] not in (2, 3):
+        raise InputError(f"build_map_index: roadgraph xyz must be (R, 3), got shape {xyz.shape}")
+    r = len(xyz)
+    arrays = {"dir": (dir, (r, 3)), "types": (types, (r,)), "ids": (ids, (r,)), "valid": (valid, (r,))}
+    if speed_limit is not None:
+        arrays["speed_limit"] = (speed_limit, (r,))
+    for name, (value, shape) in arrays.items():
+        if np.shape(value) != shape and np.size(value) != int(np.prod(shape)):
+            raise InputError(f"build_map_index: roadgraph {name} has shape {np.shape(value)}, expected {shape}")
+    xyz = np.pad(xyz, ((0, 0), (0, 3 - xyz.shape[1])))
+    dir = np.asarray(dir, np.float32).reshape(r, 3)
+    types = np.asarray(types).reshape(r).astype(np.int64)
+    ids = np.asarray(ids).reshape(r).astype(np.int64)
+    valid = np.asarray(valid).reshape(r).astype(bool) & np.all(np.isfinite(xyz), axis=1)
+    speed_limit = (np.full(r, -1.0, np.float32) if speed_limit is None
+                   else np.asarray(speed_limit, np.float32).reshape(r))
+    if center_xy is None:
+        center_xy = xyz[valid, :2].mean(0) if valid.any() else np.zeros(2)
+    center_xy = np.asarray(center_xy, np.float64).reshape(2)
+    g, s_cap = config.grid_size, config.max_segments
+    origin = center_xy - 0.5 * g * config.cell_size
+
+    start, end, seg_type, seg_id, seg_limit = _segments(
+        xyz, types, ids, valid, speed_limit, tuple(config.edge_types) + tuple(config.lane_types), config)
+    # cap S: keep the segments nearest the grid centre
+    mid_dist = np.linalg.norm(0.5 * (start + end) - center_xy, axis=1)
+    order = np.argsort(mid_dist, kind="stable")
+    dropped = max(len(order) - s_cap, 0)
+    order = order[:s_cap]
+    start, end, seg_type, seg_id, seg_limit, mid_dist = (
+        start[order], end[order], seg_type[order], seg_id[order], seg_limit[order], mid_dist[order])
+    n = len(start)
+
+    pairs_item, pairs_cell = _segment_cells(start, end, origin, config)
+    cell_centre = origin + (np.stack([pairs_cell // g, pairs_cell % g], 1) + 0.5) * config.cell_size
+    priority = np.linalg.norm(0.5 * (start[pairs_item] + end[pairs_item]) - cell_centre, axis=1)
+    is_edge = np.isin(seg_type, config.edge_types)
+    tables = []
+    for wanted, slots in ((is_edge, config.edge_slots_per_cell), (~is_edge, config.slots_per_cell)):
+        keep = wanted[pairs_item]
+        table, lost = _fill_cells((pairs_item[keep], pairs_cell[keep]), priority[keep], g * g, slots)
+        tables.append(table.reshape(g, g, slots))
+        dropped += lost
+    field = _edge_distance_field(start[is_edge], end[is_edge], origin, config)
+    obs = _obs_points(xyz, dir, types, ids, valid, speed_limit, origin, config)
+
+    def pad(values, fill, dtype, shape_tail=()):
+        out = np.full((s_cap,) + shape_tail, fill, dtype)
+        out[:n] = values
+        return out
+
+    ends = np.concatenate([start, end], 1).T.astype(np.float32) if n else np.zeros((4, 0), np.float32)
+
+    def dense(table, values, fill):
+        if n == 0:
+            return np.full(values.shape[:-1] + table.shape, fill, values.dtype)
+        return np.where(table >= 0, values[..., np.maximum(table, 0)], fill).astype(values.dtype)
+
+    return MapIndex(
+        edge_seg=jnp.asarray(dense(tables[0], ends, 0.0)),
+        lane_seg=jnp.asarray(dense(tables[1], ends, 0.0)),
+        lane_seg_id=jnp.asarray(dense(tables[1], seg_id.astype(np.int32), -1)),
+        lane_seg_speed_limit=jnp.asarray(dense(tables[1], seg_limit.astype(np.float32), -1.0)),
+        seg_start=jnp.asarray(pad(start, 0.0, np.float32, (2,))),
+        seg_end=jnp.asarray(pad(end, 0.0, np.float32, (2,))),
+        seg_type=jnp.asarray(pad(seg_type, 0, np.int32)),
+        seg_id=jnp.asarray(pad(seg_id, -1, np.int32)),
+        seg_speed_limit=jnp.asarray(pad(seg_limit, -1.0, np.float32)),
+        seg_valid=jnp.asarray(pad(np.ones(n, bool), False, bool)),
+        origin_xy=jnp.asarray(origin, jnp.float32),
+        edge_cells=jnp.asarray(tables[0]),
+        lane_cells=jnp.asarray(tables[1]),
+        cell_edge_distance=jnp.asarray(field),
+        obs_points=jnp.asarray(np.concatenate([np.moveaxis(obs[0], -1, 0), np.moveaxis(obs[1], -1, 0)])),
+        obs_type=jnp.asarray(obs[2]),
+        obs_speed_limit=jnp.asarray(obs[3]), obs_valid=jnp.asarray(obs[4]),
+        num_dropped=jnp.asarray(dropped, jnp.int32),
+        cell_size=float(config.cell_size), obs_cell_size=float(config.obs_cell_size),
+        query_window=int(config.query_window),
+    )
+
+
+# ----------------------------------------------------------------------------- JAX queries
+
+
+def _window(cells: jnp.ndarray, origin: jnp.ndarray, cell_size: float, xy: jnp.ndarray,
+            window: int) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Slots of the window x window cells centred on the cell holding xy. -> (window*window*C,), centre cell."""
+    g = cells.shape[0]
+    cell = jnp.floor((xy - origin) / cell_size).astype(jnp.int32)
+    start = jnp.clip(cell - window // 2, 0, g - window)
+    block = jax.lax.dynamic_slice(cells, (start[0], start[1], 0), (window, window, cells.shape[2]))
+    # a query point outside the grid sees nothing rather than the clamped border cells
+    inside = jnp.all((cell >= -(window // 2)) & (cell < g + window // 2))
+    return jnp.where(inside, block.reshape(-1), -1), cell
+
+
+def query_segments(map_index: MapIndex, xy: jnp.ndarray, kind: str = "edge",
+                   window: int | None = None) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Candidate segments near xy (2,): indices (K,) int32 and valid (K,), K = window^2 * C.
+
+    Covers at least (window // 2) * cell_size metres around xy. kind: "edge" or "lane".
+    """
+    cells = map_index.edge_cells if kind == "edge" else map_index.lane_cells
+    slots, _ = _window(cells, map_index.origin_xy, map_index.cell_size, xy,
+                       window or map_index.query_window)
+    return jnp.maximum(slots, 0), slots >= 0
+
+
+def _cell_value(grid: jnp.ndarray, origin: jnp.ndarray, cell_size: float, xy: jnp.ndarray) -> jnp.ndarray:
+    """Value of the (clamped) grid cell holding each point. grid (G, G), xy (..., 2) -> (...,)."""
+    g = grid.shape[0]
+    cell = jnp.clip(jnp.floor((xy - origin) / cell_size).astype(jnp.int32), 0, g - 1)
+    return grid[cell[..., 0], cell[..., 1]]
+
+
+def _block(grid: jnp.ndarray, origin: jnp.ndarray, cell_size: float, xy: jnp.ndarray, window: int,
+           lead: int = 0) -> jnp.ndarray:
+    """Contiguous window x window block of a per-cell grid around the cell holding xy, flattened.
+
+    grid (*lead_dims, G, G, C) -> (*lead_dims, window * window * C).
+    """
+    g, c = grid.shape[lead], grid.shape[lead + 2]
+    # odd windows centre on the query's cell, even ones on its nearest cell corner
+    start = jnp.floor((xy - origin) / cell_size + 0.5 - 0.5 * window).astype(jnp.int32)
+    start = jnp.clip(start, 0, g - window)
+    starts = (0,) * lead + (start[0], start[1], 0)
+    sizes = grid.shape[:lead] + (window, window, c)
+    return jax.lax.dynamic_slice(grid, starts, sizes).reshape(grid.shape[:lead] + (-1,))
+
+
+def _inside_grid(map_index: MapIndex, xy: jnp.ndarray, grid_size: int, window: int) -> jnp.ndarray:
+    """False when the query cell is so far outside the grid that the clamped window is unrelated."""
+    cell = jnp.floor((xy - map_index.origin_xy) / map_index.cell_size).astype(jnp.int32)
+    return jnp.all((cell >= -(window // 2)) & (cell < grid_size + window // 2))
+
+
+def edge_block(map_index: MapIndex, xy: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Road-edge segments of the query window around xy (2,). -> (4, K) [sx, sy, ex, ey], valid (K,)."""
+    w = map_index.query_window
+    seg = _block(map_index.edge_seg, map_index.origin_xy, map_index.cell_size, xy, w, lead=1)
+    slots = _block(map_index.edge_cells, map_index.origin_xy, map_index.cell_size, xy, w)
+    ok = (slots >= 0) & _inside_grid(map_index, xy, map_index.edge_cells.shape[0], w)
+    return seg, ok
+
+
+def signed_edge_distance(map_index: MapIndex, points: jnp.ndarray, center_xy: jnp.ndarray) -> jnp.ndarray:
+    """Signed distance of points to the nearest road edge: > 0 off the road, < 0 on it.
+
+    Road edges are oriented with the road on their left. One window of cells around `center_xy`
+    (e.g. the SDC centre) serves all points (e.g. its 4 corners). Where no edge is in reach the
+    host-computed distance of the point's cell is used. points (P, 2), center_xy (2,) -> (P,).
+    """
+    seg, ok = edge_block(map_index, center_xy)
+    sx, sy, ex, ey = seg[0], seg[1], seg[2], seg[3]  # (K,)
+    px, py = points[:, 0:1], points[:, 1:2]  # (P, 1)
+    dx, dy = ex - sx, ey - sy
+    inv_len_sq = 1.0 / jnp.maximum(dx * dx + dy * dy, 1e-12)
+    rx, ry = px - sx, py - sy  # (P, K)
+    t = jnp.clip((rx * dx + ry * dy) * inv_len_sq, 0.0, 1.0)
+    ox, oy = rx - t * dx, ry - t * dy
+    dist_sq = jnp.where(ok, ox * ox + oy * oy, jnp.inf)
+    nearest = jnp.argmin(dist_sq, axis=1)  # (P,)
+    best_sq = jnp.min(dist_sq, axis=1)
+    cross = dx * ry - dy * rx  # > 0: point left of the segment (road side)
+    side = jnp.take_along_axis(cross, nearest[:, None], 1)[:, 0]
+    best = jnp.sqrt(jnp.where(jnp.isfinite(best_sq), best_sq, 0.0))
+    signed = jnp.where(side < 0, best, -best)
+    fallback = _cell_value(map_index.cell_edge_distance, map_index.origin_xy, map_index.cell_size, points)
+    return jnp.where(jnp.isfinite(best_sq), signed, fallback).astype(jnp.float32)
+
+
+@flax.struct.dataclass
+class LaneCandidates:
+    """Lane-centre segments near a query point, projected (fixed K from the window of cells)."""
+
+    lane_id: jnp.ndarray  # (K,) int32, -1 when invalid
+    distance: jnp.ndarray  # (K,) float32, point-to-segment distance (inf when invalid)
+    lateral: jnp.ndarray  # (K,) float32, signed offset of the point from the centreline (+ left)
+    dir_x: jnp.ndarray  # (K,) float32, unit lane direction x
+    dir_y: jnp.ndarray  # (K,) float32, unit lane direction y
+    speed_limit: jnp.ndarray  # (K,) float32, m/s, -1 unknown
+    closest_x: jnp.ndarray  # (K,) float32, projection of the point on the segment
+    closest_y: jnp.ndarray  # (K,) float32
+    valid: jnp.ndarray  # (K,) bool
+
+    @property
+    def direction(self) -> jnp.ndarray:
+        """(K, 2) unit lane directions."""
+        return jnp.stack([self.dir_x, self.dir_y], -1)
+
+
+def lane_candidates(map_index: MapIndex, xy: jnp.ndarray) -> LaneCandidates:
+    """Lane-centre segments of the query window around xy (2,), projected. -> LaneCandidates (K)."""
+    w = map_index.query_window
+    seg = _block(map_index.lane_seg, map_index.origin_xy, map_index.cell_size, xy, w, lead=1)
+    ids = _block(map_index.lane_seg_id, map_index.origin_xy, map_index.cell_size, xy, w)
+    limit = _block(map_index.lane_seg_speed_limit, map_index.origin_xy, map_index.cell_size, xy, w)
+    ok = (ids >= 0) & _inside_grid(map_index, xy, map_index.lane_cells.shape[0], w)
+    sx, sy, ex, ey = seg[0], seg[1], seg[2], seg[3]
+    dx, dy = ex - sx, ey - sy
+    length = jnp.sqrt(jnp.maximum(dx * dx + dy * dy, 1e-12))
+    ux, uy = dx / length, dy / length
+    rx, ry = xy[0] - sx, xy[1] - sy
+    along = jnp.clip(rx * ux + ry * uy, 0.0, length)
+    cx, cy = sx + along * ux, sy + along * uy
+    dist = jnp.sqrt((xy[0] - cx) ** 2 + (xy[1] - cy) ** 2)
+    return LaneCandidates(
+        lane_id=jnp.where(ok, ids, -1), distance=jnp.where(ok, dist, jnp.inf), lateral=ux * ry - uy * rx,
+        dir_x=ux, dir_y=uy, speed_limit=jnp.where(ok, limit, -1.0), closest_x=cx, closest_y=cy, valid=ok)
+
+
+def nearest_lane(candidates: LaneCandidates, yaw: jnp.ndarray, heading_weight: float = 3.0) -> jnp.ndarray:
+    """Index into the candidates of the lane the agent drives on: near and aligned with `yaw`.
+
+    Score = distance + heading_weight * (1 - cos(heading error)), so overlapping lanes at
+    junctions resolve to the one the agent follows. -> () int32.
+    """
+    misalign = 1.0 - (candidates.dir_x * jnp.cos(yaw) + candidates.dir_y * jnp.sin(yaw))
+    return jnp.argmin(candidates.distance + heading_weight * misalign).astype(jnp.int32)
+
+
+@flax.struct.dataclass
+class ObservationPoints:
+    """Observation sample points in the window of observation cells around a centre point."""
+
+    x: jnp.ndarray  # (M,) float32
+    y: jnp.ndarray  # (M,) float32
+    dir_x: jnp.ndarray  # (M,) float32, unit direction
+    dir_y: jnp.ndarray  # (M,) float32
+    types: jnp.ndarray  # (M,) int32
+    speed_limit: jnp.ndarray  # (M,) float32, m/s, -1 unknown
+    valid: jnp.ndarray  # (M,) bool
+
+    @property
+    def xy(self) -> jnp.ndarray:
+        """(M, 2) points."""
+        return jnp.stack([self.x, self.y], -1)
+
+
+def observation_points(map_index: MapIndex, center_xy: jnp.ndarray, window: int = 5) -> ObservationPoints:
+    """All thinned points of the window x window observation cells around center_xy (2,).
+
+    M = window^2 * obs_slots_per_cell; covers at least (window - 1) / 2 * obs_cell_size metres.
+    No sort: points come in cell order with a validity mask.
+    """
+    def block(grid, lead=0):
+        return _block(grid, map_index.origin_xy, map_index.obs_cell_size, center_xy, window, lead)
+
+    pts = block(map_index.obs_points, lead=1)
+    return ObservationPoints(x=pts[0], y=pts[1], dir_x=pts[2], dir_y=pts[3], types=block(map_index.obs_type),
+                             speed_limit=block(map_index.obs_speed_limit), valid=block(map_index.obs_valid))
+
+
+@flax.struct.dataclass
+class PathProjection:
+    """The projection of a point on each SDC path."""
+
+    distance: jnp.ndarray  # (P,) float32, distance to the path (inf for invalid paths)
+    arc: jnp.ndarray  # (P,) float32, arc length of the projection along the path
+    direction: jnp.ndarray  # (P, 2) float32, unit path direction at the projection
+
+
+def project_on_paths(path_xy: jnp.ndarray, path_valid: jnp.ndarray, path_arc: jnp.ndarray,
+                     xy: jnp.ndarray, stride: int = 10) -> PathProjection:
+    """Project xy (2,) on every path, coarse to fine: nearest knot every `stride` points, then the
+    exact segments around it. path_xy (P, N, 2), path_valid (P, N), path_arc (P, N) -> PathProjection.
+
+    Cost is O(P * (N / stride + 2 * stride)) instead of O(P * N).
+    """
+    num_points = path_xy.shape[1]
+    px, py = path_xy[..., 0], path_xy[..., 1]
+    kx, ky = px[:, ::stride] - xy[0], py[:, ::stride] - xy[1]
+    knot_dist = jnp.where(path_valid[:, ::stride], kx * kx + ky * ky, jnp.inf)
+    best_knot = jnp.argmin(knot_dist, axis=1) * stride  # (P,)
+    width = min(2 * stride + 1, num_points)
+    lo = jnp.clip(best_knot - stride, 0, num_points - width)
+    # one contiguous (4, width) window per path: a few block copies instead of per-element gathers
+    packed = jnp.stack([px, py, path_arc, path_valid.astype(path_xy.dtype)])  # (4, P, N)
+    window = jax.vmap(lambda rows, start: jax.lax.dynamic_slice(rows, (0, start), (4, width)),
+                      in_axes=(1, 0), out_axes=1)(packed, lo)  # (4, P, width)
+    wx, wy, w_arc, w_valid = window[0], window[1], window[2], window[3] > 0.5
+    ax, ay, dx, dy = wx[:, :-1], wy[:, :-1], wx[:, 1:] - wx[:, :-1], wy[:, 1:] - wy[:, :-1]
+    ok = w_valid[:, :-1] & w_valid[:, 1:]
+    rx, ry = xy[0] - ax, xy[1] - ay
+    len_sq = jnp.maximum(dx * dx + dy * dy, 1e-12)
+    t = jnp.clip((rx * dx + ry * dy) / len_sq, 0.0, 1.0)
+    ox, oy = rx - t * dx, ry - t * dy
+    dist_sq = jnp.where(ok, ox * ox + oy * oy, jnp.inf)
+    is_k = jnp.arange(width - 1)[None] == jnp.argmin(dist_sq, axis=1)[:, None]  # (P, width - 1) one-hot
+
+    def at_k(values):  # select by mask and sum: elementwise, no gather
+        return jnp.sum(jnp.where(is_k, values, 0.0), axis=1)
+
+    best_sq = jnp.min(dist_sq, axis=1)
+    t_k = at_k(t)
+    arc = at_k(w_arc[:, :-1]) + t_k * (at_k(w_arc[:, 1:]) - at_k(w_arc[:, :-1]))
+    seg_len = jnp.sqrt(at_k(len_sq))
+    direction = jnp.stack([at_k(dx), at_k(dy)], -1) / jnp.maximum(seg_len, 1e-6)[:, None]
+    # a path with a single valid point still has a distance
+    single = jnp.min(jnp.where(w_valid, (wx - xy[0]) ** 2 + (wy - xy[1]) ** 2, jnp.inf), axis=1)
+    dist = jnp.sqrt(jnp.where(jnp.isfinite(best_sq), best_sq, single))
+    return PathProjection(distance=dist.astype(jnp.float32), arc=arc.astype(jnp.float32),
+                          direction=direction.astype(jnp.float32))
+
+
+def route_reference_arcs(path_xy: jnp.ndarray, path_valid: jnp.ndarray, path_arc: jnp.ndarray,
+                         log_start_xy: jnp.ndarray, log_end_xy: jnp.ndarray) -> jnp.ndarray:
+    """Arc length of the logged SDC start and end positions along every path, computed once per
+    episode (at reset) for the progress metrics. -> (P, 2) float32 [start arc, end arc]."""
+    start = project_on_paths(path_xy, path_valid, path_arc, log_start_xy).arc
+    end = project_on_paths(path_xy, path_valid, path_arc, log_end_xy).arc
+    return jnp.stack([start, end], -1)
+
+
+def path_arc_length(path_xy: np.ndarray, path_valid: np.ndarray) -> np.ndarray:
+    """Cumulative arc length along each path (host helper when a shard lacks it). (P, N, 2) -> (P, N)."""
+    step = np.linalg.norm(np.diff(np.asarray(path_xy, np.float64), axis=1), axis=-1)
+    step = np.where(np.asarray(path_valid)[:, 1:], step, 0.0)
+    return np.concatenate([np.zeros((step.shape[0], 1)), np.cumsum(step, 1)], 1).astype(np.float32)

@@ -1,0 +1,240 @@
+"""SDC-frame, normalised, fixed-shape observation features with validity masks."""
+
+from __future__ import annotations
+
+import flax.struct
+import jax
+import jax.numpy as jnp
+
+from scenariomax.schema import (
+    LANE_TYPES,
+    ROAD_EDGE_TYPES,
+    ROAD_LINE_TYPES,
+    TL_ARROW_CAUTION,
+    TL_ARROW_GO,
+    TL_CAUTION,
+    TL_FLASHING_CAUTION,
+    TL_GO,
+)
+from vmax_sim.geometry.boxes import boxes_overlap
+from vmax_sim.geometry.transforms import to_local_points, to_local_vectors
+from vmax_sim.map_index import MapIndex, PathProjection, observation_points, project_on_paths
+from vmax_sim.metrics.config import DEFAULT_METRICS_CONFIG
+from vmax_sim.observation.config import DEFAULT_OBSERVATION_CONFIG, ObservationConfig
+
+NUM_OBJECT_TYPES = 4  # vehicle, pedestrian, cyclist, other (enum 1..4)
+OBJECT_FEATURES = 8 + NUM_OBJECT_TYPES  # x, y, vx, vy, cos, sin, length, width, type one-hot
+ROADGRAPH_FEATURES = 5 + 3  # x, y, dir x, dir y, speed limit, edge / lane / line one-hot
+LIGHT_FEATURES = 2 + 4  # x, y, state one-hot: red, yellow, green, unknown
+
+
+@flax.struct.dataclass
+class ObservationInputs:
+    """What the observation needs at one step, as plain arrays."""
+
+    sdc_xy: jnp.ndarray  # (k, 2) float32, SDC centre history, last = now
+    sdc_yaw: jnp.ndarray  # (k,) float32
+    sdc_vel: jnp.ndarray  # (k, 2) float32
+    sdc_valid: jnp.ndarray  # (k,) bool
+    object_xy: jnp.ndarray  # (N, k, 2) float32, other objects' history
+    object_yaw: jnp.ndarray  # (N, k) float32
+    object_vel: jnp.ndarray  # (N, k, 2) float32
+    object_size: jnp.ndarray  # (N, 2) float32, length and width
+    object_type: jnp.ndarray  # (N,) int32, object_type enum
+    object_valid: jnp.ndarray  # (N, k) bool; False for the SDC's own slot
+    light_xy: jnp.ndarray  # (L, 2) float32
+    light_state: jnp.ndarray  # (L,) int32
+    light_valid: jnp.ndarray  # (L,) bool
+    path_xy: jnp.ndarray  # (P, M, 2) float32
+    path_valid: jnp.ndarray  # (P, M) bool
+    path_arc: jnp.ndarray  # (P, M) float32
+    path_on_route: jnp.ndarray  # (P,) bool
+
+
+@flax.struct.dataclass
+class Observation:
+    sdc: jnp.ndarray  # (k, 6) float32, SDC history: x, y, vx, vy, cos, sin (SDC frame, normalised)
+    sdc_valid: jnp.ndarray  # (k,) bool
+    objects: jnp.ndarray  # (n, k, OBJECT_FEATURES) float32
+    objects_valid: jnp.ndarray  # (n, k) bool
+    roadgraph: jnp.ndarray  # (m, ROADGRAPH_FEATURES) float32
+    roadgraph_valid: jnp.ndarray  # (m,) bool
+    lights: jnp.ndarray  # (num_lights, LIGHT_FEATURES) float32
+    lights_valid: jnp.ndarray  # (num_lights,) bool
+    path_targets: jnp.ndarray  # (num_path_targets, 2) float32
+    path_targets_valid: jnp.ndarray  # (num_path_targets,) bool
+
+
+def _heading_features(xy, vel, yaw, origin, origin_yaw, config: ObservationConfig):
+    """x, y, vx, vy, cos, sin in the SDC frame, normalised. (..., 2), (..., 2), (...,) -> (..., 6)."""
+    local = to_local_points(xy, origin, origin_yaw) / config.max_distance
+    local_vel = to_local_vectors(vel, origin_yaw) / config.max_speed
+    rel_yaw = yaw - origin_yaw
+    return jnp.concatenate([local, local_vel, jnp.cos(rel_yaw)[..., None], jnp.sin(rel_yaw)[..., None]], -1)
+
+
+def nearest_objects(sdc_xy: jnp.ndarray, object_xy: jnp.ndarray, valid: jnp.ndarray,
+                    num: int) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """The `num` valid objects nearest the SDC now (padded when there are fewer slots).
+
+    (2,), (N, 2), (N,) -> indices (num,) int32, valid (num,) bool.
+    """
+    dist = jnp.where(valid, jnp.linalg.norm(object_xy - sdc_xy, axis=-1), jnp.inf)
+    k = min(num, dist.shape[0])
+    neg, idx = jax.lax.top_k(-dist, k)
+    return (jnp.pad(idx.astype(jnp.int32), (0, num - k)), jnp.pad(jnp.isfinite(neg), (0, num - k)))
+
+
+def object_features(inputs: ObservationInputs, indices: jnp.ndarray, index_valid: jnp.ndarray,
+                    config: ObservationConfig):
+    """(n, k, OBJECT_FEATURES) features and (n, k) validity of the chosen objects."""
+    origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
+    xy, vel, yaw = inputs.object_xy[indices], inputs.object_vel[indices], inputs.object_yaw[indices]
+    valid = inputs.object_valid[indices] & index_valid[:, None]
+    motion = _heading_features(xy, vel, yaw, origin, origin_yaw, config)
+    size = jnp.broadcast_to(inputs.object_size[indices][:, None] / config.max_size, xy.shape)
+    one_hot = jax.nn.one_hot(inputs.object_type[indices] - 1, NUM_OBJECT_TYPES)
+    one_hot = jnp.broadcast_to(one_hot[:, None], xy.shape[:2] + (NUM_OBJECT_TYPES,))
+    feats = jnp.concatenate([motion, size, one_hot], -1)
+    return jnp.where(valid[..., None], feats, 0.0), valid
+
+
+def compact(valid: jnp.ndarray, num: int) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Slots for up to `num` of the valid entries, evenly thinned when there are more (no sort).
+
+    valid (M,) -> source index per output slot (num,) int32, slot valid (num,) bool.
+    """
+    count = jnp.sum(valid)
+    stride = jnp.maximum((count + num - 1) // num, 1)
+    rank = jnp.cumsum(valid) - 1
+    keep = valid & (rank % stride == 0)
+    kept_before = jnp.cumsum(keep)  # non-decreasing: output slot j takes the first entry with j + 1 kept
+    slots = jnp.arange(num, dtype=kept_before.dtype)
+    source = jnp.searchsorted(kept_before, slots, side="right", method="scan_unrolled").astype(jnp.int32)
+    filled = slots < kept_before[-1]
+    return jnp.minimum(source, valid.shape[0] - 1), filled
+
+
+def roadgraph_features(map_index: MapIndex, sdc_xy: jnp.ndarray, sdc_yaw: jnp.ndarray,
+                       config: ObservationConfig):
+    """Map points inside the box ahead of the SDC, from the observation cells around the box
+    centre (no full-roadgraph top_k). -> (m, ROADGRAPH_FEATURES), (m,) valid, where m is
+    config.num_roadgraph_points or all window points."""
+    cos, sin = jnp.cos(sdc_yaw), jnp.sin(sdc_yaw)
+    shift = 0.5 * (config.roadgraph_front - config.roadgraph_back)
+    box_centre = sdc_xy + shift * jnp.stack([cos, sin])
+    pts = observation_points(map_index, box_centre, config.roadgraph_window)
+    rx, ry = pts.x - sdc_xy[0], pts.y - sdc_xy[1]
+    lx, ly = rx * cos + ry * sin, ry * cos - rx * sin
+    in_box = ((lx <= config.roadgraph_front) & (lx >= -config.roadgraph_back)
+              & (jnp.abs(ly) <= config.roadgraph_side))
+    is_edge = jnp.isin(pts.types, jnp.asarray(ROAD_EDGE_TYPES))
+    is_lane = jnp.isin(pts.types, jnp.asarray(LANE_TYPES))
+    is_line = jnp.isin(pts.types, jnp.asarray(ROAD_LINE_TYPES))
+    wanted = jnp.isin(pts.types, jnp.asarray(config.roadgraph_type_ids))
+    valid = pts.valid & in_box & wanted
+    columns = (lx / config.max_distance, ly / config.max_distance,
+               pts.dir_x * cos + pts.dir_y * sin, pts.dir_y * cos - pts.dir_x * sin,
+               jnp.maximum(pts.speed_limit, 0.0) / config.max_speed,
+               is_edge.astype(jnp.float32), is_lane.astype(jnp.float32), is_line.astype(jnp.float32))
+    if config.num_roadgraph_points is not None:
+        source, valid = compact(valid, config.num_roadgraph_points)
+        columns = tuple(c[source] for c in columns)
+    feats = jnp.stack(columns, -1)
+    return jnp.where(valid[:, None], feats, 0.0), valid
+
+
+def light_features(inputs: ObservationInputs, config: ObservationConfig):
+    """The closest traffic lights with their state. -> (num_lights, LIGHT_FEATURES), (num_lights,)."""
+    origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
+    dist = jnp.where(inputs.light_valid, jnp.linalg.norm(inputs.light_xy - origin, axis=-1), jnp.inf)
+    num = min(config.num_lights, dist.shape[0])
+    neg, idx = jax.lax.top_k(-dist, num)
+    state = inputs.light_state[idx]
+    red = jnp.isin(state, jnp.asarray(DEFAULT_METRICS_CONFIG.red_light_states))
+    yellow = jnp.isin(state, jnp.asarray((TL_CAUTION, TL_ARROW_CAUTION, TL_FLASHING_CAUTION)))
+    green = jnp.isin(state, jnp.asarray((TL_GO, TL_ARROW_GO)))
+    unknown = ~(red | yellow | green)
+    feats = jnp.concatenate([to_local_points(inputs.light_xy[idx], origin, origin_yaw) / config.max_distance,
+                             jnp.stack([red, yellow, green, unknown], -1).astype(jnp.float32)], -1)
+    valid = jnp.isfinite(neg)
+    feats = jnp.where(valid[:, None], feats, 0.0)
+    pad = config.num_lights - num
+    return jnp.pad(feats, ((0, pad), (0, 0))), jnp.pad(valid, (0, pad))
+
+
+def path_targets(inputs: ObservationInputs, config: ObservationConfig, projection: PathProjection | None = None):
+    """Points every `path_target_spacing` m ahead along the on-route path nearest the SDC.
+
+    projection: the SDC's `project_on_paths` result when already computed (the metrics have it).
+    -> (num_path_targets, 2) SDC-frame normalised, (num_path_targets,) valid.
+    """
+    origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
+    proj = projection or project_on_paths(inputs.path_xy, inputs.path_valid, inputs.path_arc, origin)
+    usable = jnp.any(inputs.path_valid, axis=1) & inputs.path_on_route
+    route = jnp.argmin(jnp.where(usable, proj.distance, jnp.inf))
+    pxy, pvalid, parc = inputs.path_xy[route], inputs.path_valid[route], inputs.path_arc[route]
+    big = jnp.finfo(jnp.float32).max
+    arc = jnp.where(pvalid, parc, big)
+    targets = proj.arc[route] + config.path_target_spacing * (1 + jnp.arange(config.num_path_targets))
+    hi = jnp.clip(jnp.searchsorted(arc, targets), 1, arc.shape[0] - 1)
+    lo = hi - 1
+    frac = jnp.clip((targets - arc[lo]) / jnp.maximum(arc[hi] - arc[lo], 1e-6), 0.0, 1.0)
+    xy = pxy[lo] + frac[:, None] * (pxy[hi] - pxy[lo])
+    valid = usable[route] & (targets <= jnp.max(jnp.where(pvalid, parc, -big))) & pvalid[lo] & pvalid[hi]
+    local = to_local_points(xy, origin, origin_yaw) / config.max_distance
+    return jnp.where(valid[:, None], local, 0.0), valid
+
+
+def apply_noise(key: jax.Array, inputs: ObservationInputs, indices: jnp.ndarray, index_valid: jnp.ndarray,
+                config: ObservationConfig) -> tuple[ObservationInputs, jnp.ndarray]:
+    """Gaussian position noise, distance-based dropout and line-of-sight occlusion of the chosen
+    objects. -> noisy inputs, (n,) bool visibility of the chosen objects."""
+    noise = config.noise
+    key_pos, key_drop = jax.random.split(key)
+    xy = inputs.object_xy + noise.position_std * jax.random.normal(key_pos, inputs.object_xy.shape)
+    origin = inputs.sdc_xy[-1]
+    now = inputs.object_xy[indices, -1]
+    dist = jnp.linalg.norm(now - origin, axis=-1)
+    ramp = jnp.clip((dist - noise.dropout_start) / max(config.max_distance - noise.dropout_start, 1e-3), 0.0, 1.0)
+    visible = jax.random.uniform(key_drop, dist.shape) >= noise.dropout_max_prob * ramp
+    if noise.occlusion:
+        boxes = jnp.concatenate([now, inputs.object_size[indices], inputs.object_yaw[indices, -1:]], -1)
+        valid_now = inputs.object_valid[indices, -1] & index_valid
+        # sight line to each object as a zero-width box, tested against every nearer object
+        mid, delta = 0.5 * (origin + now), now - origin
+        sight = jnp.concatenate([mid, jnp.linalg.norm(delta, axis=-1, keepdims=True), jnp.full_like(dist[:, None], 1e-3),
+                                 jnp.arctan2(delta[:, 1], delta[:, 0])[:, None]], -1)
+        blocks = boxes_overlap(sight[:, None], boxes[None]) & valid_now[None] & (dist[None] < dist[:, None])
+        visible = visible & ~jnp.any(blocks, axis=1)
+    return inputs.replace(object_xy=xy), visible
+
+
+def observe(map_index: MapIndex, inputs: ObservationInputs, config: ObservationConfig = DEFAULT_OBSERVATION_CONFIG,
+            key: jax.Array | None = None, candidates: tuple[jnp.ndarray, jnp.ndarray] | None = None,
+            path_projection: PathProjection | None = None) -> Observation:
+    """Build the observation of one scene at one step (vmap for batches).
+
+    candidates (indices (n,), valid (n,)) may pass the objects already chosen for the metrics
+    (`vmax_sim.metrics.shared_queries`) so both share one selection; otherwise the n nearest.
+    path_projection may pass the SDC's projection on the paths the metrics computed.
+    key drives the optional perception noise.
+    """
+    if candidates is None:
+        candidates = nearest_objects(inputs.sdc_xy[-1], inputs.object_xy[:, -1], inputs.object_valid[:, -1],
+                                     config.num_objects)
+    indices, index_valid = candidates
+    noise = config.noise
+    if key is not None and (noise.position_std > 0 or noise.dropout_max_prob > 0 or noise.occlusion):
+        inputs, visible = apply_noise(key, inputs, indices, index_valid, config)
+        index_valid = index_valid & visible
+    objects, objects_valid = object_features(inputs, indices, index_valid, config)
+    origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
+    sdc = _heading_features(inputs.sdc_xy, inputs.sdc_vel, inputs.sdc_yaw, origin, origin_yaw, config)
+    roadgraph, roadgraph_valid = roadgraph_features(map_index, origin, origin_yaw, config)
+    lights, lights_valid = light_features(inputs, config)
+    targets, targets_valid = path_targets(inputs, config, path_projection)
+    return Observation(sdc=jnp.where(inputs.sdc_valid[:, None], sdc, 0.0), sdc_valid=inputs.sdc_valid,
+                       objects=objects, objects_valid=objects_valid, roadgraph=roadgraph,
+                       roadgraph_valid=roadgraph_valid, lights=lights, lights_valid=lights_valid,
+                       path_targets=targets, path_targets_valid=targets_valid)
