@@ -18,6 +18,9 @@ import multiprocessing
 import os
 import shutil
 import time
+from collections import deque
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
@@ -333,10 +336,24 @@ def _results_process(source: Source, units: Sequence[str], settings: ConvertSett
         for task in tasks:
             yield _convert_unit_star(task)
         return
-    # forkserver: safe even when the caller has JAX/threads loaded; ordered imap -> deterministic shards.
+    # forkserver: safe even when the caller has JAX/threads loaded. Results are taken in unit order
+    # (deterministic shards) with a bounded number of units in flight (bounded memory and disk).
+    # Unlike multiprocessing.Pool, the executor fails loudly if a worker dies (e.g. OOM-killed).
     context = multiprocessing.get_context("forkserver")
-    with context.Pool(processes=workers, maxtasksperchild=64) as pool:
-        yield from pool.imap(_convert_unit_star, tasks, chunksize=1)
+    window = 2 * workers
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        pending: deque = deque()
+        next_task = 0
+        while next_task < len(tasks) or pending:
+            while next_task < len(tasks) and len(pending) < window:
+                pending.append((tasks[next_task][1], pool.submit(_convert_unit_star, tasks[next_task])))
+                next_task += 1
+            unit, future = pending.popleft()
+            try:
+                yield future.result()
+            except BrokenProcessPool:
+                raise ConversionError(f"a worker process died while converting {unit} (out of memory?); "
+                                      "rerun with --resume to continue") from None
 
 
 def _results_ray(source: Source, units: Sequence[str], settings: ConvertSettings, workers: int) -> Iterator[UnitResult]:

@@ -20,6 +20,7 @@ _OBJECT_TRAJECTORY_FIELDS = (
 )
 _LIGHT_FLOAT_FIELDS = ("tl_x", "tl_y", "tl_z")
 MAX_ABS_YAW = 4 * np.pi
+MAX_EXACT_OBJECT_ID = 2 ** 24  # integers above this are not exact in float32
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -81,6 +82,7 @@ class Scenario:
     agent_path_valid: np.ndarray | None = None  # (A, Q) bool
     agent_path_arc_length: np.ndarray | None = None  # (A, Q) float32
     # --- metadata -------------------------------------------------------------------------------------
+    world_origin: np.ndarray | None = None  # (3,) float64, whole metres; positions are relative to it
     source_dataset: str = ""
     current_time_index: int = 10
     metadata: dict[str, Any] = dataclasses.field(default_factory=dict)  # not serialised
@@ -190,6 +192,7 @@ def _fill_defaults(s: Scenario) -> None:
     _as(s, "lane_valid", bool, (k,), True)
     for name in ("lane_successors", "lane_predecessors", "lane_left_neighbors", "lane_right_neighbors"):
         _as(s, name, np.int64, (k, 0), -1)
+    _as(s, "world_origin", np.float64, (3,), 0.0)
     _as(s, "agent_path_object_index", np.int64, (0,), -1)
     a = s.agent_path_object_index.shape[0]
     _as(s, "agent_path_xyz", np.float32, (a, q, 3), 0.0)
@@ -240,6 +243,10 @@ def validate_scenario(s: Scenario) -> list[str]:
     ids = s.object_id[present]
     if ids.size != np.unique(ids).size:
         problems.append("duplicate object ids among present objects")
+    if np.any(np.abs(ids) >= MAX_EXACT_OBJECT_ID):
+        problems.append("object ids must be below 2^24 (state/id is stored as float32)")
+    if np.any(s.world_origin != np.round(s.world_origin)) or np.any(np.abs(s.world_origin) >= MAX_EXACT_OBJECT_ID):
+        problems.append("world_origin must be whole metres below 2^24 (stored exactly as float32)")
     stamps = np.where(valid, s.timestamp_micros, np.iinfo(np.int64).min)
     for row, row_valid in zip(stamps, valid):
         seen = row[row_valid]

@@ -48,8 +48,11 @@ def list_shard_files(path: str | os.PathLike) -> list[Path]:
 def iter_raw_records(path: str | os.PathLike) -> Iterator[tuple[Path, int, bytes]]:
     """Yields (file, record index, bytes) for every record under `path`."""
     for file in list_shard_files(path):
-        for index, data in enumerate(iter_records(file)):
-            yield file, index, data
+        try:
+            for index, data in enumerate(iter_records(file)):
+                yield file, index, data
+        except RecordError as error:
+            raise ShardReadError(str(error)) from None
 
 
 def read_shards(path: str | os.PathLike, sizes: Sizes | None = None) -> Iterator[Scenario]:

@@ -26,6 +26,25 @@ import numpy as np
 from scenariomax.schema import LANE_TYPES, ROAD_EDGE_TYPES, ROAD_LINE_TYPES
 from scenariomax.sources.base import InputError
 
+__all__ = [
+    "OBS_POINT_FEATURES",
+    "LaneCandidates",
+    "MapIndex",
+    "MapIndexConfig",
+    "ObservationPoints",
+    "PathProjection",
+    "build_map_index",
+    "edge_block",
+    "lane_candidates",
+    "nearest_lane",
+    "observation_points",
+    "path_arc_length",
+    "project_on_paths",
+    "query_segments",
+    "route_reference_arcs",
+    "signed_edge_distance",
+]
+
 FAR_DISTANCE = 1e4  # metres, stands for "no feature in reach"
 
 
@@ -39,7 +58,7 @@ class MapIndexConfig:
     edge_slots_per_cell: int = 8  # road-edge segments per cell (edges are sparser than lanes)
     max_segments: int = 4096  # S: segments kept, nearest the grid centre first
     query_window: int = 3  # cells per side looked at around a query point (odd: 3 -> 3x3)
-    merge_angle_deg: float = 2.0  # straight runs whose heading changes less are merged
+    simplify_tolerance: float = 0.1  # metres a merged segment may stray from the points it skips
     edge_types: tuple[int, ...] = ROAD_EDGE_TYPES  # offroad queries
     lane_types: tuple[int, ...] = LANE_TYPES  # lane / route queries
     obs_types: tuple[int, ...] = ROAD_EDGE_TYPES + LANE_TYPES + ROAD_LINE_TYPES  # observation points
@@ -73,8 +92,11 @@ class MapIndex:
     lane_seg: jnp.ndarray  # (4, G, G, C) float32, same for lane centres
     lane_seg_id: jnp.ndarray  # (G, G, C) int32, lane id per slot (-1 empty)
     lane_seg_speed_limit: jnp.ndarray  # (G, G, C) float32, m/s, -1 unknown
-    cell_edge_distance: jnp.ndarray  # (G, G) float32, signed distance of cell centres to nearest edge
-    obs_points: jnp.ndarray  # (4, Go, Go, Co) float32, [x, y, dir x, dir y] of observation points
+    cell_edge_distance: jnp.ndarray  # (G, G) float32, signed distance of cell centres to the nearest
+    # edge, only for cells whose query window holds no edge (0 elsewhere: never read)
+    # observation points stored ready to use (array of structures): the per-step transform is one
+    # small matmul, and no per-step transpose into the (points, features) layout is needed
+    obs_features: jnp.ndarray  # (Go, Go, Co, 8) float32, [x, y, dir x, dir y, speed limit (0 unknown), is edge, is lane, is line]
     obs_type: jnp.ndarray  # (Go, Go, Co) int32
     obs_speed_limit: jnp.ndarray  # (Go, Go, Co) float32, m/s, -1 unknown
     obs_valid: jnp.ndarray  # (Go, Go, Co) bool
@@ -88,11 +110,16 @@ class MapIndex:
 
 
 def _segments(xyz, types, ids, valid, speed_limit, keep_types, config):
-    """Merged segments of the polylines whose type is in keep_types. numpy -> (start, end, type, id, limit)."""
+    """Simplified segments of the polylines whose type is in keep_types.
+
+    Consecutive points of one polyline are greedily merged while the merged chord stays within
+    `simplify_tolerance` of the points it skips (bound: accumulated turn x length / 8) and no
+    longer than one cell. numpy -> (start (n, 2), end (n, 2), type, id, speed limit).
+    """
     r = len(xyz)
+    empty = (np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
     if r < 2:
-        empty = np.zeros((0, 2))
-        return empty, empty, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+        return empty
     selected = valid & np.isin(types, keep_types)
     xy = xyz[:, :2].astype(np.float64)
     nxt = np.minimum(np.arange(1, r + 1), r - 1)
@@ -102,18 +129,29 @@ def _segments(xyz, types, ids, valid, speed_limit, keep_types, config):
     prev_linked = np.concatenate([[False], linked[:-1]])
     heading = np.arctan2(xy[nxt, 1] - xy[:, 1], xy[nxt, 0] - xy[:, 0])
     turn = np.abs((heading - np.concatenate([heading[:1], heading[:-1]]) + np.pi) % (2 * np.pi) - np.pi)
-    # interior points of straight runs are merged away; runs are cut so segments stay short
-    straight = prev_linked & linked & (turn < np.deg2rad(config.merge_angle_deg))
-    arc = np.concatenate([[0.0], np.cumsum((gap * linked)[:-1])])
-    last_vertex_arc = np.maximum.accumulate(np.where(~straight, arc, -np.inf))
-    chunk = np.floor((arc - last_vertex_arc) / max(config.cell_size - 1.0, 1.0)).astype(np.int64)
-    new_chunk = straight & (chunk != np.concatenate([[0], chunk[:-1]]))
-    vertex_idx = np.flatnonzero(selected & (~straight | new_chunk))
-    a, b = vertex_idx[:-1], vertex_idx[1:]
-    # (a, b) is a segment when every point from a up to b is linked to its successor
-    linked_count = np.concatenate([[0], np.cumsum(linked)])
-    joined = (linked_count[b] - linked_count[a]) == (b - a)
-    a, b = a[joined], b[joined]
+    turn = np.where(prev_linked & linked, turn, 0.0)
+    cum_turn = np.cumsum(turn)
+    arc = np.concatenate([[0.0], np.cumsum(np.where(linked, gap, 0.0)[:-1])])
+    max_len = config.cell_size - 1.0
+    run_starts = np.flatnonzero(linked & ~prev_linked)
+    run_ends = np.flatnonzero(~linked & prev_linked)  # last point of each run
+    starts, ends = [], []
+    for first, last in zip(run_starts, run_ends):
+        a = first
+        while a < last:
+            hi = min(last, a + 64)
+            j = np.arange(a + 1, hi + 1)
+            length = arc[j] - arc[a]
+            bent = cum_turn[j - 1] - cum_turn[a]
+            ok = (length <= max_len) & (bent * length / 8.0 <= config.simplify_tolerance)
+            ok[0] = True  # always advance by at least one point
+            b = int(j[len(ok) - 1 - np.argmax(ok[::-1])]) if ok.all() else int(j[np.argmin(ok) - 1])
+            starts.append(a)
+            ends.append(b)
+            a = b
+    if not starts:
+        return empty
+    a, b = np.asarray(starts), np.asarray(ends)
     return xy[a], xy[b], types[a], ids[a], speed_limit[a]
 
 
@@ -147,28 +185,39 @@ def _segment_cells(start, end, origin, config):
     return np.concatenate(items), np.concatenate(cells)
 
 
-def _edge_distance_field(start, end, origin, config):
-    """Signed distance of every cell centre to its nearest road edge (+ = off road). -> (G, G)."""
-    g, cs = config.grid_size, config.cell_size
+def _edge_distance_field(start, end, origin, edge_table, config):
+    """Signed distance of cell centres to their nearest road edge (+ = off road). -> (G, G).
+
+    Only cells whose query window holds no edge ever read it, so only those are computed (the
+    rest keep 0).
+    """
+    g, cs, w = config.grid_size, config.cell_size, config.query_window
+    field = np.zeros((g, g), np.float32)
     if len(start) == 0:
         return np.full((g, g), -FAR_DISTANCE, np.float32)
-    centres = origin + (np.stack(np.meshgrid(np.arange(g), np.arange(g), indexing="ij"), -1) + 0.5) * cs
-    pts = centres.reshape(-1, 1, 2)
-    best_dist = np.full(len(pts), np.inf)
-    best_side = np.zeros(len(pts))
-    for lo in range(0, len(start), 512):  # chunks bound the host memory
-        s, e = start[lo:lo + 512][None], end[lo:lo + 512][None]
-        seg = e - s
-        t = np.clip(np.sum((pts - s) * seg, -1) / np.maximum(np.sum(seg * seg, -1), 1e-12), 0, 1)
-        dist = np.linalg.norm(pts - (s + t[..., None] * seg), axis=-1)
-        side = seg[..., 0] * (pts - s)[..., 1] - seg[..., 1] * (pts - s)[..., 0]
+    has_edge = np.pad((edge_table >= 0).any(-1), w // 2)
+    window_has_edge = np.zeros((g, g), bool)
+    for dx in range(w):
+        for dy in range(w):
+            window_has_edge |= has_edge[dx:dx + g, dy:dy + g]
+    cells = np.argwhere(~window_has_edge)
+    if len(cells) == 0:
+        return field
+    pts = (origin + (cells + 0.5) * cs).astype(np.float32)[:, None]
+    s, seg = start.astype(np.float32)[None], (end - start).astype(np.float32)[None]
+    inv = 1.0 / np.maximum(np.sum(seg * seg, -1), 1e-12)
+    best_dist = np.full(len(pts), np.inf, np.float32)
+    best_side = np.zeros(len(pts), np.float32)
+    for lo in range(0, len(pts), 256):  # chunks bound the host memory
+        rel = pts[lo:lo + 256] - s
+        t = np.clip(np.sum(rel * seg, -1) * inv, 0, 1)
+        dist = np.sum((rel - t[..., None] * seg) ** 2, -1)
         arg = np.argmin(dist, axis=1)
-        chunk_best = dist[np.arange(len(pts)), arg]
-        better = chunk_best < best_dist
-        best_dist = np.where(better, chunk_best, best_dist)
-        best_side = np.where(better, side[np.arange(len(pts)), arg], best_side)
-    signed = np.where(best_side < 0, best_dist, -best_dist)
-    return signed.reshape(g, g).astype(np.float32)
+        rows = np.arange(len(arg))
+        best_dist[lo:lo + 256] = np.sqrt(dist[rows, arg])
+        best_side[lo:lo + 256] = seg[0, arg, 0] * rel[rows, arg, 1] - seg[0, arg, 1] * rel[rows, arg, 0]
+    field[cells[:, 0], cells[:, 1]] = np.where(best_side < 0, best_dist, -best_dist)
+    return field
 
 
 def _obs_points(xyz, dirs, types, ids, valid, speed_limit, origin, config):
@@ -268,7 +317,7 @@ def build_map_index(xyz: np.ndarray, dir: np.ndarray, types: np.ndarray, ids: np
         table, lost = _fill_cells((pairs_item[keep], pairs_cell[keep]), priority[keep], g * g, slots)
         tables.append(table.reshape(g, g, slots))
         dropped += lost
-    field = _edge_distance_field(start[is_edge], end[is_edge], origin, config)
+    field = _edge_distance_field(start[is_edge], end[is_edge], origin, tables[0], config)
     obs = _obs_points(xyz, dir, types, ids, valid, speed_limit, origin, config)
 
     def pad(values, fill, dtype, shape_tail=()):
@@ -298,7 +347,10 @@ def build_map_index(xyz: np.ndarray, dir: np.ndarray, types: np.ndarray, ids: np
         edge_cells=jnp.asarray(tables[0]),
         lane_cells=jnp.asarray(tables[1]),
         cell_edge_distance=jnp.asarray(field),
-        obs_points=jnp.asarray(np.concatenate([np.moveaxis(obs[0], -1, 0), np.moveaxis(obs[1], -1, 0)])),
+        obs_features=jnp.asarray(np.concatenate([
+            obs[0], obs[1], np.maximum(obs[3], 0.0)[..., None],
+            np.stack([np.isin(obs[2], config.edge_types), np.isin(obs[2], config.lane_types),
+                      np.isin(obs[2], ROAD_LINE_TYPES)], -1)], -1).astype(np.float32)),
         obs_type=jnp.asarray(obs[2]),
         obs_speed_limit=jnp.asarray(obs[3]), obs_valid=jnp.asarray(obs[4]),
         num_dropped=jnp.asarray(dropped, jnp.int32),
@@ -310,28 +362,17 @@ def build_map_index(xyz: np.ndarray, dir: np.ndarray, types: np.ndarray, ids: np
 # ----------------------------------------------------------------------------- JAX queries
 
 
-def _window(cells: jnp.ndarray, origin: jnp.ndarray, cell_size: float, xy: jnp.ndarray,
-            window: int) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Slots of the window x window cells centred on the cell holding xy. -> (window*window*C,), centre cell."""
-    g = cells.shape[0]
-    cell = jnp.floor((xy - origin) / cell_size).astype(jnp.int32)
-    start = jnp.clip(cell - window // 2, 0, g - window)
-    block = jax.lax.dynamic_slice(cells, (start[0], start[1], 0), (window, window, cells.shape[2]))
-    # a query point outside the grid sees nothing rather than the clamped border cells
-    inside = jnp.all((cell >= -(window // 2)) & (cell < g + window // 2))
-    return jnp.where(inside, block.reshape(-1), -1), cell
-
-
 def query_segments(map_index: MapIndex, xy: jnp.ndarray, kind: str = "edge",
                    window: int | None = None) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Candidate segments near xy (2,): indices (K,) int32 and valid (K,), K = window^2 * C.
-
-    Covers at least (window // 2) * cell_size metres around xy. kind: "edge" or "lane".
+    """Candidate segments near xy (2,): indices (K,) int32 into MapIndex.seg_* and valid (K,),
+    K = window^2 * slots. Covers at least (window // 2) * cell_size metres around xy.
+    kind: "edge" or "lane". (The metrics use the dense per-cell copies instead: same cells.)
     """
     cells = map_index.edge_cells if kind == "edge" else map_index.lane_cells
-    slots, _ = _window(cells, map_index.origin_xy, map_index.cell_size, xy,
-                       window or map_index.query_window)
-    return jnp.maximum(slots, 0), slots >= 0
+    window = window or map_index.query_window
+    slots = _block(cells, map_index.origin_xy, map_index.cell_size, xy, window)
+    ok = (slots >= 0) & _inside_grid(map_index, xy, cells.shape[0], window)
+    return jnp.maximum(slots, 0), ok
 
 
 def _cell_value(grid: jnp.ndarray, origin: jnp.ndarray, cell_size: float, xy: jnp.ndarray) -> jnp.ndarray:
@@ -376,7 +417,7 @@ def signed_edge_distance(map_index: MapIndex, points: jnp.ndarray, center_xy: jn
 
     Road edges are oriented with the road on their left. One window of cells around `center_xy`
     (e.g. the SDC centre) serves all points (e.g. its 4 corners). Where no edge is in reach the
-    host-computed distance of the point's cell is used. points (P, 2), center_xy (2,) -> (P,).
+    host-computed distance of the centre's cell is used. points (P, 2), center_xy (2,) -> (P,).
     """
     seg, ok = edge_block(map_index, center_xy)
     sx, sy, ex, ey = seg[0], seg[1], seg[2], seg[3]  # (K,)
@@ -393,7 +434,8 @@ def signed_edge_distance(map_index: MapIndex, points: jnp.ndarray, center_xy: jn
     side = jnp.take_along_axis(cross, nearest[:, None], 1)[:, 0]
     best = jnp.sqrt(jnp.where(jnp.isfinite(best_sq), best_sq, 0.0))
     signed = jnp.where(side < 0, best, -best)
-    fallback = _cell_value(map_index.cell_edge_distance, map_index.origin_xy, map_index.cell_size, points)
+    # no edge in the window: every point takes the host-computed distance of the centre's cell
+    fallback = _cell_value(map_index.cell_edge_distance, map_index.origin_xy, map_index.cell_size, center_xy)
     return jnp.where(jnp.isfinite(best_sq), signed, fallback).astype(jnp.float32)
 
 
@@ -447,22 +489,21 @@ def nearest_lane(candidates: LaneCandidates, yaw: jnp.ndarray, heading_weight: f
     return jnp.argmin(candidates.distance + heading_weight * misalign).astype(jnp.int32)
 
 
+OBS_POINT_FEATURES = 8  # x, y, dir x, dir y, speed limit, is edge, is lane, is line
+
+
 @flax.struct.dataclass
 class ObservationPoints:
     """Observation sample points in the window of observation cells around a centre point."""
 
-    x: jnp.ndarray  # (M,) float32
-    y: jnp.ndarray  # (M,) float32
-    dir_x: jnp.ndarray  # (M,) float32, unit direction
-    dir_y: jnp.ndarray  # (M,) float32
+    features: jnp.ndarray  # (M, 8) float32, world frame: see MapIndex.obs_features
     types: jnp.ndarray  # (M,) int32
-    speed_limit: jnp.ndarray  # (M,) float32, m/s, -1 unknown
     valid: jnp.ndarray  # (M,) bool
 
     @property
     def xy(self) -> jnp.ndarray:
         """(M, 2) points."""
-        return jnp.stack([self.x, self.y], -1)
+        return self.features[:, :2]
 
 
 def observation_points(map_index: MapIndex, center_xy: jnp.ndarray, window: int = 5) -> ObservationPoints:
@@ -471,12 +512,21 @@ def observation_points(map_index: MapIndex, center_xy: jnp.ndarray, window: int 
     M = window^2 * obs_slots_per_cell; covers at least (window - 1) / 2 * obs_cell_size metres.
     No sort: points come in cell order with a validity mask.
     """
-    def block(grid, lead=0):
-        return _block(grid, map_index.origin_xy, map_index.obs_cell_size, center_xy, window, lead)
+    def block(grid):
+        return _block(grid, map_index.origin_xy, map_index.obs_cell_size, center_xy, window)
 
-    pts = block(map_index.obs_points, lead=1)
-    return ObservationPoints(x=pts[0], y=pts[1], dir_x=pts[2], dir_y=pts[3], types=block(map_index.obs_type),
-                             speed_limit=block(map_index.obs_speed_limit), valid=block(map_index.obs_valid))
+    feats = _block_rows(map_index, center_xy, window)
+    return ObservationPoints(features=feats, types=block(map_index.obs_type), valid=block(map_index.obs_valid))
+
+
+def _block_rows(map_index: MapIndex, center_xy: jnp.ndarray, window: int) -> jnp.ndarray:
+    """(window^2 * Co, 8) rows of obs_features around center_xy, one contiguous block slice."""
+    grid = map_index.obs_features
+    g, c, f = grid.shape[0], grid.shape[2], grid.shape[3]
+    start = jnp.floor((center_xy - map_index.origin_xy) / map_index.obs_cell_size + 0.5 - 0.5 * window)
+    start = jnp.clip(start.astype(jnp.int32), 0, g - window)
+    out = jax.lax.dynamic_slice(grid, (start[0], start[1], 0, 0), (window, window, c, f))
+    return out.reshape(-1, f)
 
 
 @flax.struct.dataclass

@@ -33,9 +33,15 @@ class LaneLinks:
     right_neighbors: Sequence[int] = ()
 
 
-def resample_polyline(xyz: np.ndarray, spacing: float = DEFAULT_SPACING_M, closed: bool = False) -> np.ndarray:
-    """Points every `spacing` metres along the polyline, keeping both ends. (n, 3) -> (m, 3)."""
+def resample_polyline(xyz: np.ndarray, spacing: float = DEFAULT_SPACING_M, closed: bool = False,
+                      origin: np.ndarray | None = None) -> np.ndarray:
+    """Points every `spacing` metres along the polyline, keeping both ends. (n, 3) -> (m, 3).
+
+    `origin` (3,) is subtracted in float64 before the float32 cast, so large map coordinates
+    (e.g. UTM) keep centimetre precision."""
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    if origin is not None:
+        xyz = xyz - np.asarray(origin, np.float64)
     if closed and len(xyz) > 2 and not np.allclose(xyz[0], xyz[-1]):
         xyz = np.vstack([xyz, xyz[:1]])
     if len(xyz) < 2:
@@ -62,12 +68,13 @@ def direction_vectors(xyz: np.ndarray) -> np.ndarray:
     return dirs
 
 
-def polylines_to_roadgraph(polylines: Sequence[MapPolyline], spacing: float = DEFAULT_SPACING_M) -> dict:
+def polylines_to_roadgraph(polylines: Sequence[MapPolyline], spacing: float = DEFAULT_SPACING_M,
+                           origin: np.ndarray | None = None) -> dict:
     """Concatenated roadgraph arrays (unpadded): keys roadgraph_xyz, _dir, _type, _id, _valid,
     _speed_limit, ready to pass to `Scenario(**...)`."""
     xyz, dirs, types, ids, limits = [], [], [], [], []
     for line in polylines:
-        points = resample_polyline(line.xyz, spacing, line.closed)
+        points = resample_polyline(line.xyz, spacing, line.closed, origin)
         if len(points) == 0:
             continue
         xyz.append(points)

@@ -72,9 +72,10 @@ from pathlib import Path
 from scenariomax import Sizes
 from scenariomax.pipeline import ConvertSettings, convert
 from tests.foundation.toy_source import ToySource
-source = ToySource(num_units=8, per_unit=4, delay_s=float(sys.argv[2]))
-convert(source, ConvertSettings(out=Path(sys.argv[1]), sizes=Sizes(num_objects=8, num_roadgraph=2000, num_lanes=4),
-        shard_size=5, workers=2, progress=False, resume=True))
+if __name__ == "__main__":  # worker processes re-import this module
+    source = ToySource(num_units=8, per_unit=4, delay_s=float(sys.argv[2]))
+    convert(source, ConvertSettings(out=Path(sys.argv[1]), sizes=Sizes(num_objects=8, num_roadgraph=2000, num_lanes=4),
+            shard_size=5, workers=2, progress=False, resume=True))
 """
 
 

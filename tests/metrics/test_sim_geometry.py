@@ -1,8 +1,12 @@
 """Hand-worked geometry: box corners, SAT overlap, swept contact time, circle covers, segments."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import Polygon
 
 from vmax_sim.geometry import (
     box_corners,
@@ -86,3 +90,22 @@ def test_frame_transform_and_wrap():
     local = to_local_points(jnp.array([[1.0, 1.0]]), jnp.array([1.0, 0.0]), jnp.asarray(np.pi / 2))
     np.testing.assert_allclose(local, [[1.0, 0.0]], atol=1e-6)
     assert float(wrap_angle(jnp.asarray(3 * np.pi / 2))) == pytest.approx(-np.pi / 2)
+
+
+BOX = st.tuples(st.floats(-6, 6), st.floats(-6, 6), st.floats(0.5, 6), st.floats(0.5, 3), st.floats(-4, 4))
+_OVERLAP = jax.jit(boxes_overlap)
+_CONTACT = jax.jit(contact_time, static_argnames="horizon")
+
+
+@settings(max_examples=30, deadline=None)
+@given(BOX, BOX)
+def test_overlap_agrees_with_shapely_and_is_symmetric(a, b):
+    box_a, box_b = jnp.asarray(a, jnp.float32), jnp.asarray(b, jnp.float32)
+    poly_a, poly_b = (Polygon(np.asarray(box_corners(x))) for x in (box_a, box_b))
+    area = poly_a.intersection(poly_b).area
+    got = bool(_OVERLAP(box_a, box_b))
+    assert got == bool(_OVERLAP(box_b, box_a))
+    if area > 1e-3:
+        assert got and float(_CONTACT(box_a, jnp.zeros(2), box_b, jnp.zeros(2), horizon=1.0)) == 0.0
+    elif poly_a.distance(poly_b) > 1e-3:
+        assert not got

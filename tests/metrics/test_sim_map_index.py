@@ -96,3 +96,29 @@ def test_build_on_an_empty_map():
     index = build_map_index(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros(0, bool))
     assert int(index.seg_valid.sum()) == 0
     assert float(signed_edge_distance(index, jnp.zeros((1, 2)), jnp.zeros(2))[0]) < 0  # no edges: on road
+
+
+def test_signed_distance_matches_brute_force_on_a_random_map():
+    from vmax_sim.bench import synthetic_scene
+
+    scene = synthetic_scene(8000, num_objects=4, seed=3)
+    centre = np.array([10.0, -2.0])
+    index = build_map_index(scene["xyz"], scene["dir"], scene["types"], scene["ids"], scene["valid"],
+                            center_xy=centre)
+    rng = np.random.default_rng(0)
+    queries = centre + rng.uniform(-20, 20, (64, 2))
+    corners = queries[:, None] + rng.uniform(-2.5, 2.5, (64, 4, 2))
+    got = np.asarray(jax.jit(jax.vmap(signed_edge_distance, in_axes=(None, 0, 0)))(
+        index, jnp.asarray(corners, jnp.float32), jnp.asarray(queries, jnp.float32)))
+    # brute force over every edge segment of the index
+    edge = np.isin(np.asarray(index.seg_type), (15, 16)) & np.asarray(index.seg_valid)
+    a, b = np.asarray(index.seg_start)[edge], np.asarray(index.seg_end)[edge]
+    p = corners.reshape(-1, 1, 2)
+    t = np.clip(np.sum((p - a) * (b - a), -1) / np.sum((b - a) ** 2, -1), 0, 1)
+    dist = np.linalg.norm(p - (a + t[..., None] * (b - a)), axis=-1)
+    nearest = np.argmin(dist, axis=1)
+    cross = ((b - a)[nearest, 0] * (p[:, 0, 1] - a[nearest, 1]) - (b - a)[nearest, 1] * (p[:, 0, 0] - a[nearest, 0]))
+    expected = np.where(cross < 0, dist.min(1), -dist.min(1)).reshape(64, 4)
+    close = np.abs(expected) < 5.0  # the window guarantees >= 5 m around every corner
+    np.testing.assert_allclose(got[close], expected[close], atol=1e-3)
+    assert close.sum() > 50

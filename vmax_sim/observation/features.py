@@ -7,9 +7,6 @@ import jax
 import jax.numpy as jnp
 
 from scenariomax.schema import (
-    LANE_TYPES,
-    ROAD_EDGE_TYPES,
-    ROAD_LINE_TYPES,
     TL_ARROW_CAUTION,
     TL_ARROW_GO,
     TL_CAUTION,
@@ -115,32 +112,37 @@ def compact(valid: jnp.ndarray, num: int) -> tuple[jnp.ndarray, jnp.ndarray]:
     return jnp.minimum(source, valid.shape[0] - 1), filled
 
 
+def _point_transform(sdc_xy: jnp.ndarray, sdc_yaw: jnp.ndarray, config: ObservationConfig):
+    """Affine map of MapIndex.obs_features rows into the normalised SDC frame: rows @ m + b."""
+    cos, sin = jnp.cos(sdc_yaw), jnp.sin(sdc_yaw)
+    rot = jnp.array([[cos, -sin], [sin, cos]])  # row vector @ rot = world -> SDC frame
+    m = jnp.zeros((8, 8), jnp.float32)
+    m = m.at[:2, :2].set(rot / config.max_distance).at[2:4, 2:4].set(rot)
+    m = m.at[4, 4].set(1.0 / config.max_speed).at[5, 5].set(1.0).at[6, 6].set(1.0).at[7, 7].set(1.0)
+    b = jnp.zeros(8, jnp.float32).at[:2].set(-(sdc_xy @ rot) / config.max_distance)
+    return m, b
+
+
 def roadgraph_features(map_index: MapIndex, sdc_xy: jnp.ndarray, sdc_yaw: jnp.ndarray,
                        config: ObservationConfig):
     """Map points inside the box ahead of the SDC, from the observation cells around the box
     centre (no full-roadgraph top_k). -> (m, ROADGRAPH_FEATURES), (m,) valid, where m is
     config.num_roadgraph_points or all window points."""
-    cos, sin = jnp.cos(sdc_yaw), jnp.sin(sdc_yaw)
     shift = 0.5 * (config.roadgraph_front - config.roadgraph_back)
-    box_centre = sdc_xy + shift * jnp.stack([cos, sin])
+    box_centre = sdc_xy + shift * jnp.stack([jnp.cos(sdc_yaw), jnp.sin(sdc_yaw)])
     pts = observation_points(map_index, box_centre, config.roadgraph_window)
-    rx, ry = pts.x - sdc_xy[0], pts.y - sdc_xy[1]
-    lx, ly = rx * cos + ry * sin, ry * cos - rx * sin
+    m, b = _point_transform(sdc_xy, sdc_yaw, config)
+    feats = pts.features @ m + b  # (M, 8)
+    lx, ly = feats[:, 0] * config.max_distance, feats[:, 1] * config.max_distance
     in_box = ((lx <= config.roadgraph_front) & (lx >= -config.roadgraph_back)
               & (jnp.abs(ly) <= config.roadgraph_side))
-    is_edge = jnp.isin(pts.types, jnp.asarray(ROAD_EDGE_TYPES))
-    is_lane = jnp.isin(pts.types, jnp.asarray(LANE_TYPES))
-    is_line = jnp.isin(pts.types, jnp.asarray(ROAD_LINE_TYPES))
-    wanted = jnp.isin(pts.types, jnp.asarray(config.roadgraph_type_ids))
+    # the type set is a union of the edge / lane / line groups: read it off the one-hot columns
+    groups = {"edges": (5,), "edges+lanes": (5, 6), "edges+lanes+lines": (5, 6, 7)}[config.roadgraph_types]
+    wanted = sum(feats[:, col] for col in groups) > 0.5
     valid = pts.valid & in_box & wanted
-    columns = (lx / config.max_distance, ly / config.max_distance,
-               pts.dir_x * cos + pts.dir_y * sin, pts.dir_y * cos - pts.dir_x * sin,
-               jnp.maximum(pts.speed_limit, 0.0) / config.max_speed,
-               is_edge.astype(jnp.float32), is_lane.astype(jnp.float32), is_line.astype(jnp.float32))
     if config.num_roadgraph_points is not None:
         source, valid = compact(valid, config.num_roadgraph_points)
-        columns = tuple(c[source] for c in columns)
-    feats = jnp.stack(columns, -1)
+        feats = feats[source]
     return jnp.where(valid[:, None], feats, 0.0), valid
 
 

@@ -120,10 +120,17 @@ def build_scenario(log: LogIndex, data: LogSlice, anchor: int, city: CityMap, si
 
     crop = _crop_box(tracks["x"][0, valid[0]], tracks["y"][0, valid[0]], map_margin_m)
     smap = scenario_map(city, crop)
-    roadgraph = polylines_to_roadgraph(smap.polylines)
+    # UTM coordinates (~1e6 m) lose up to 0.25 m in float32: store positions relative to a
+    # whole-metre origin at the ego's current position (kept in `world_origin`).
+    origin = np.array([np.round(tracks["x"][0, current]), np.round(tracks["y"][0, current]), 0.0])
+    tracks["x"] = np.where(valid, tracks["x"] - origin[0], -1.0)
+    tracks["y"] = np.where(valid, tracks["y"] - origin[1], -1.0)
+    roadgraph = polylines_to_roadgraph(smap.polylines, origin=origin)
     lanes = lane_graph_arrays(smap.lane_links, sizes.num_lane_links)
     statuses = [row for sweep in sweeps for row in data.lights.get(sweep, ())]
     lights = _light_arrays(statuses, step_of_sweep, smap.stop_points, num_steps)
+    lights["tl_x"] = np.where(lights["tl_valid"], lights["tl_x"] - origin[0], -1.0)
+    lights["tl_y"] = np.where(lights["tl_valid"], lights["tl_y"] - origin[1], -1.0)
 
     scenario = Scenario(
         scenario_id=scenario_id(log, anchor),
@@ -133,6 +140,7 @@ def build_scenario(log: LogIndex, data: LogSlice, anchor: int, city: CityMap, si
         **tracks,
         **roadgraph, **lanes, **lights,
         tl_timestamp_micros=relative,
+        world_origin=origin,
         source_dataset=SOURCE_DATASET,
         current_time_index=current,
         metadata={"log_name": log.log_name, "map_version": log.map_version,

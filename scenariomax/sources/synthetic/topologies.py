@@ -305,4 +305,6 @@ def build_network(rng: np.random.Generator, topology: str | None = None) -> Road
     """A random network of the given topology (drawn from the rng when None)."""
     if topology is None:
         topology = TOPOLOGIES[int(rng.choice(len(TOPOLOGIES), p=TOPOLOGY_WEIGHTS))]
+    if topology not in TOPOLOGY_BUILDERS:
+        raise ValueError(f"unknown synthetic topology {topology!r} (choose from {', '.join(TOPOLOGIES)})")
     return TOPOLOGY_BUILDERS[topology](rng)

@@ -1,6 +1,7 @@
 """Building blocks with hand-worked values: signal phases, geometry checks, road edges."""
 
 import numpy as np
+import pytest
 
 from scenariomax.enrich.roadgraph import MapPolyline, polylines_to_roadgraph
 from scenariomax.scenario import Scenario
@@ -75,3 +76,8 @@ def test_junction_lanes_are_linked_both_ways():
     # every lane entering the junction carries a light or a stop sign
     entering = [lane for lane in network.lanes if not lane.is_gated and any(by_id[n].is_gated for n in lane.successors)]
     assert entering and all(lane.light_index >= 0 or lane.has_stop_sign for lane in entering)
+
+
+def test_unknown_topology_is_a_clear_error():
+    with pytest.raises(ValueError, match="unknown synthetic topology 'spaghetti'"):
+        build_network(np.random.default_rng(0), "spaghetti")
