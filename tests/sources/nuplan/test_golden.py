@@ -19,7 +19,7 @@ from scenariomax.sources.nuplan.map_features import (
 )
 from tests.sources.nuplan import builders as b
 
-X_TOL = 0.04  # float32 holds UTM eastings (~6.6e5 m) to 1/32 m
+X_TOL = 2e-3  # positions are stored relative to a whole-metre world_origin, so float32 keeps mm precision
 
 
 def _by_id(scenario: Scenario, object_id: int) -> int:
@@ -51,8 +51,10 @@ def test_ego_is_sdc_resampled_to_10hz_at_box_centre(nuplan_scenarios):
     pose_times = b.T0 + np.round((times - b.T0) / 10_000) * 10_000  # nearest 100 Hz ego_pose
     expected_x = b.EGO_START_X + b.EGO_SPEED * (pose_times - b.T0) / 1e6 + 1.461  # rear axle -> centre
     assert scenario.valid[0].all()
-    np.testing.assert_allclose(scenario.x[0], expected_x, atol=X_TOL)
-    np.testing.assert_allclose(scenario.y[0], b.N0, atol=X_TOL)
+    ox, oy, _ = scenario.world_origin
+    assert ox == np.round(expected_x[10]) and oy == np.round(b.N0)  # the ego's current position, rounded
+    np.testing.assert_allclose(scenario.x[0] + ox, expected_x, atol=X_TOL)
+    np.testing.assert_allclose(scenario.y[0] + oy, b.N0, atol=X_TOL)
     np.testing.assert_array_equal(scenario.timestamp_micros[0], times - times[0])
     np.testing.assert_allclose(scenario.velocity_x[0], 10.0, atol=1e-5)
     np.testing.assert_allclose(scenario.speed[0], 10.0, atol=1e-5)
@@ -74,7 +76,7 @@ def test_agents_types_and_validity(nuplan_scenarios):
     np.testing.assert_allclose(scenario.velocity_y[pedestrian, scenario.valid[pedestrian]], 0.5)
     lead = _by_id(scenario, 1)
     t = (np.array([b.lidar_time(i) for i in lidar]) - b.T0) / 1e6
-    np.testing.assert_allclose(scenario.x[lead], b.E0 + 20 + 10 * t, atol=X_TOL)
+    np.testing.assert_allclose(scenario.x[lead] + scenario.world_origin[0], b.E0 + 20 + 10 * t, atol=X_TOL)
     assert scenario.objects_of_interest[lead] and scenario.objects_of_interest.sum() == 1
     # SDC first, then by closest approach: the cone 30 m ahead of the origin beats the pedestrian
     assert list(scenario.object_id[:2]) == [0, 5]
@@ -88,8 +90,9 @@ def test_traffic_light_states_and_stop_points(nuplan_scenarios):
     row = int(np.flatnonzero(scenario.tl_lane_id[:, 10] == CONNECTOR_ID_OFFSET + 201)[0])
     np.testing.assert_array_equal(scenario.tl_state[row], expected)
     assert scenario.tl_valid.all()
-    np.testing.assert_allclose(scenario.tl_x[row], b.E0 + 100, atol=X_TOL)  # start of the connector
-    np.testing.assert_allclose(scenario.tl_y[row], b.N0, atol=X_TOL)
+    ox, oy, _ = scenario.world_origin
+    np.testing.assert_allclose(scenario.tl_x[row] + ox, b.E0 + 100, atol=X_TOL)  # start of the connector
+    np.testing.assert_allclose(scenario.tl_y[row] + oy, b.N0, atol=X_TOL)
     other = 1 - row
     assert scenario.tl_lane_id[other, 0] == CONNECTOR_ID_OFFSET + 202
     np.testing.assert_array_equal(scenario.tl_state[other], sch.TL_UNKNOWN)
@@ -141,7 +144,7 @@ def test_road_edges_have_the_road_on_their_left(nuplan_scenarios):
     edge = (scenario.roadgraph_type == sch.RG_ROAD_EDGE_BOUNDARY) & (np.linalg.norm(scenario.roadgraph_dir, axis=1) > 0)
     assert edge.sum() > 100
     assert np.all(scenario.roadgraph_id[edge] >= ROAD_EDGE_ID_OFFSET)
-    xyz = scenario.roadgraph_xyz[edge].astype(np.float64)
+    xyz = scenario.roadgraph_xyz[edge].astype(np.float64) + scenario.world_origin
     direction = scenario.roadgraph_dir[edge].astype(np.float64)
     left = xyz[:, :2] + 0.5 * np.stack([-direction[:, 1], direction[:, 0]], axis=1)
     right = xyz[:, :2] - 0.5 * np.stack([-direction[:, 1], direction[:, 0]], axis=1)

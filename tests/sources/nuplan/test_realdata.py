@@ -71,10 +71,11 @@ def check_against_raw(db_path: Path, maps_root: Path, max_scenarios: int = 3) ->
         for k, t in enumerate(window):
             if t is not None and scenario.valid[sdc, k]:
                 x, y = _raw_ego_centre(conn, t)
-                tolerance = max(1e-3, float(np.spacing(np.float32(max(abs(x), abs(y))))))
-                assert abs(scenario.x[sdc, k] - np.float32(x)) <= tolerance
-                assert abs(scenario.y[sdc, k] - np.float32(y)) <= tolerance
-        xs, ys = scenario.x[sdc, scenario.valid[sdc]], scenario.y[sdc, scenario.valid[sdc]]
+                # Positions are relative to a whole-metre world_origin, so millimetres survive float32.
+                assert abs(scenario.x[sdc, k] + scenario.world_origin[0] - x) <= 1e-3
+                assert abs(scenario.y[sdc, k] + scenario.world_origin[1] - y) <= 1e-3
+        xs = scenario.x[sdc, scenario.valid[sdc]] + scenario.world_origin[0]
+        ys = scenario.y[sdc, scenario.valid[sdc]] + scenario.world_origin[1]
         box = (xs.min() - 100.0, ys.min() - 100.0, xs.max() + 100.0, ys.max() + 100.0)
         lane_ids = set(scenario.roadgraph_id[np.isin(scenario.roadgraph_type, sch.LANE_TYPES)].tolist())
         raw_lanes = _raw_lane_count(map_path, box)

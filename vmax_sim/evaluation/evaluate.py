@@ -1,0 +1,153 @@
+"""`evaluate`: closed-loop episodes of a policy over scenarios, reduced to episode metrics and scores.
+
+Scores are computed per episode and then averaged (docs/metrics.md). The result holds a
+JSON-serialisable summary and the per-episode arrays.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from collections.abc import Iterable, Iterator, Sequence
+
+import jax
+import numpy as np
+
+from scenariomax.scenario import Scenario
+from scenariomax.shards import read_shards
+from scenariomax.sources.base import InputError
+from vmax_sim.data import DataConfig, scenario_to_numpy_state, stack_states
+from vmax_sim.datatypes import SimulatorState
+from vmax_sim.env.config import EnvConfig
+from vmax_sim.env.metrics_adapter import make_environment
+from vmax_sim.evaluation.policies import Policy, make_policy
+from vmax_sim.evaluation.rollout import make_rollout_fn
+from vmax_sim.metrics import MetricsConfig
+from vmax_sim.observation import ObservationConfig
+
+# Modes: how the non-scored objects behave. Only log replay exists so far; reactive (IDM),
+# perturbed-start and adversarial modes plug in here as functions (env_config) -> env_config/env.
+MODES = ("non_reactive",)
+PLANNED_MODES = ("reactive", "perturbed", "adversarial")
+SCORE_KEYS = ("accuracy", "accuracy_at_fault", "nuplan_score", "vmax_score")
+
+
+@dataclasses.dataclass(frozen=True)
+class EvaluationResult:
+    summary: dict  # JSON-serialisable: policy, mode, num_episodes, scores, mean of every episode metric
+    episodes: dict  # metric name -> (E,) float32 numpy, one entry per episode (scores included)
+    scenario_ids: tuple[str, ...]  # (E,) the scenario of each episode
+
+
+@functools.lru_cache(maxsize=8)
+def _environment(env_config: EnvConfig, metrics_config: MetricsConfig):
+    return make_environment(env_config, metrics_config)
+
+
+@functools.lru_cache(maxsize=16)
+def _named_policy(name: str, env) -> Policy:
+    return make_policy(name, env)
+
+
+def _check_mode(mode: str) -> None:
+    if mode in PLANNED_MODES:
+        raise ValueError(f"evaluation mode {mode!r} is not implemented yet; available: {MODES}")
+    if mode not in MODES:
+        raise ValueError(f"unknown evaluation mode {mode!r}; choose one of {MODES}")
+
+
+def _scenarios(data, num_scenarios: int | None) -> Iterator[Scenario]:
+    if isinstance(data, (DataConfig, str)):
+        path = data.path if isinstance(data, DataConfig) else data
+        stream: Iterable[Scenario] = read_shards(path)
+    else:
+        stream = data
+    for count, scenario in enumerate(stream):
+        if num_scenarios is not None and count >= num_scenarios:
+            return
+        yield scenario
+
+
+def _batches(data, config: DataConfig, num_scenarios: int | None) -> Iterator[tuple[list[str], SimulatorState, int]]:
+    """(scenario ids, host batch padded to batch_size by repeating its last state, number of real ones)."""
+    ids: list[str] = []
+    states: list[SimulatorState] = []
+    for scenario in _scenarios(data, num_scenarios):
+        ids.append(scenario.scenario_id)
+        states.append(scenario_to_numpy_state(scenario, config))
+        if len(states) == config.batch_size:
+            yield ids, stack_states(states), len(states)
+            ids, states = [], []
+    if states:
+        real = len(states)
+        states += [states[-1]] * (config.batch_size - real)  # same shapes: no recompile for the last batch
+        yield ids, stack_states(states), real
+
+
+def _summary(episodes: dict[str, np.ndarray], policy: str, mode: str) -> dict:
+    means = {k: float(np.mean(v)) for k, v in episodes.items()}
+    summary = {"policy": policy, "mode": mode, "num_episodes": int(len(next(iter(episodes.values()))))}
+    summary["accuracy"] = means.pop("accurate")
+    summary["accuracy_at_fault"] = means.pop("accurate_at_fault")
+    summary["nuplan_score"] = means.pop("nuplan_score")
+    summary["vmax_score"] = means.pop("vmax_score")
+    summary["metrics"] = {k: (v if math.isfinite(v) else None) for k, v in sorted(means.items())}
+    return summary
+
+
+def evaluate(policy, data, mode: str = "non_reactive", *, data_config: DataConfig | None = None,
+             env_config: EnvConfig | None = None, metrics_config: MetricsConfig | None = None,
+             obs_config: ObservationConfig | None = None, num_scenarios: int | None = None,
+             batch_size: int | None = None, seed: int = 0) -> EvaluationResult:
+    """Runs one episode per scenario and scores it.
+
+    policy: "expert", "constant", a `Policy`, or a jittable callable `fn(observation, key)` returning the
+    SDC's (action_dim,) action (see `callable_policy`). data: a `DataConfig` (its path, num_objects,
+    roadgraph and path sizes, batch_size), a shard path, or scenarios. Episodes start at
+    env_config.init_steps - 1 (step 10) and run episode_length (80) steps in one jitted `lax.scan`,
+    vmapped over the batch; by default an episode ends early on collision, off-road or red light
+    (env_config.terminate_on).
+    """
+    _check_mode(mode)
+    if isinstance(data, DataConfig):
+        data_config = data_config or data
+    data_config = data_config or DataConfig()
+    if batch_size is not None:
+        data_config = dataclasses.replace(data_config, batch_size=batch_size)
+    if not data_config.include_map_index:
+        data_config = dataclasses.replace(data_config, include_map_index=True)  # the metrics need it
+    env_config = env_config or EnvConfig(max_num_objects=data_config.num_objects)
+    if env_config.max_num_objects != data_config.num_objects:
+        raise ValueError(f"EnvConfig.max_num_objects ({env_config.max_num_objects}) must equal "
+                         f"DataConfig.num_objects ({data_config.num_objects})")
+    metrics_config = metrics_config or MetricsConfig()
+    obs_config = obs_config or ObservationConfig()
+    env = _environment(env_config, metrics_config)
+    chosen = _named_policy(policy, env) if isinstance(policy, str) else make_policy(policy, env)
+    rollout_fn = make_rollout_fn(env, chosen, metrics_config, obs_config)
+
+    key = jax.random.PRNGKey(seed)
+    collected: dict[str, list[np.ndarray]] = {}
+    scenario_ids: list[str] = []
+    for ids, batch, real in _batches(data, data_config, num_scenarios):
+        key, batch_key = jax.random.split(key)
+        rollout = rollout_fn(jax.device_put(batch), jax.random.split(batch_key, data_config.batch_size))
+        for name, values in rollout.episode.items():
+            collected.setdefault(name, []).append(np.asarray(values)[:real])
+        scenario_ids += ids
+    if not scenario_ids:
+        raise InputError(f"{getattr(data_config, 'path', data)}: no scenarios to evaluate")
+    episodes = {name: np.concatenate(parts).astype(np.float32) for name, parts in collected.items()}
+    return EvaluationResult(summary=_summary(episodes, chosen.name, mode), episodes=episodes,
+                            scenario_ids=tuple(scenario_ids))
+
+
+def format_summary(summary: dict) -> str:
+    """A small table: episodes, the four scores, then the mean of every episode metric."""
+    lines = [f"policy: {summary['policy']}  mode: {summary['mode']}  episodes: {summary['num_episodes']}"]
+    lines += [f"  {key:<28}{summary[key]:>10.4f}" for key in SCORE_KEYS]
+    lines.append("  metric means:")
+    for key, value in summary["metrics"].items():
+        lines.append(f"  {key:<28}{'n/a' if value is None else format(value, '>10.4f'):>10}")
+    return "\n".join(lines)

@@ -1,0 +1,76 @@
+"""One jitted closed-loop episode per scenario: reset, `lax.scan` over the policy steps, metrics.
+
+`make_rollout_fn` returns a jitted function over a batch of states (vmap over the batch); it is
+built once per (environment config, policy, metric and observation configs) so every batch of the
+same shape reuses one compilation.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+
+import flax.struct
+import jax
+import jax.numpy as jnp
+
+from vmax_sim.datatypes import SimulatorState
+from vmax_sim.env.metrics_adapter import observation_inputs, reference_arcs, step_inputs
+from vmax_sim.evaluation.policies import Policy
+from vmax_sim.metrics import MetricsConfig, SharedQueries, episode_metrics, shared_queries, step_metrics
+from vmax_sim.observation import ObservationConfig, observe
+
+
+@flax.struct.dataclass
+class Rollout:
+    """What one episode (or a batch of them, leading axis B) produced."""
+
+    per_step: dict  # name -> (..., num_steps) float32, `step_metrics` after each policy step
+    step_valid: jax.Array  # (..., num_steps) bool, the step belongs to the episode (not after termination)
+    terminated: jax.Array  # (..., num_steps) bool, a termination predicate fired after this step
+    episode: dict  # name -> (...) float32, `episode_metrics` over the valid steps
+
+
+def _observation(state: SimulatorState, shared: SharedQueries, config: ObservationConfig):
+    inputs = observation_inputs(state, config.num_history)
+    return observe(state.map_index, inputs, config,
+                   candidates=(shared.candidate_index[:config.num_objects],
+                               shared.candidate_valid[:config.num_objects])
+                   if shared.candidate_index.shape[0] >= config.num_objects else None,
+                   path_projection=shared.path_projection)
+
+
+def run_episode(env, policy: Policy, state: SimulatorState, key: jax.Array, metrics_config: MetricsConfig,
+                obs_config: ObservationConfig) -> Rollout:
+    """One unbatched episode from the log state `state` (any timestep): reset, then
+    `env.config.episode_length` policy steps; metrics after every step; steps after the first
+    termination are masked out of the episode metrics."""
+    state = env.reset(state)
+    arcs = reference_arcs(state, env.config)  # logged start / end along the paths, once per episode
+    num_steps = env.config.episode_length
+
+    def body(carry, step_key):
+        state, done, shared = carry
+        observation = _observation(state, shared, obs_config) if policy.needs_observation else None
+        action = policy.action_fn(state, observation, step_key)
+        state = env.step(state, action)
+        inputs = step_inputs(state, arcs)
+        shared = shared_queries(inputs, metrics_config)  # reused by next step's observation
+        metrics = step_metrics(state.map_index, inputs, metrics_config, shared)
+        terminated = env.is_terminated(state)
+        return (state, done | terminated, shared), (metrics, ~done, terminated)
+
+    first_shared = shared_queries(step_inputs(state, arcs), metrics_config)
+    keys = jax.random.split(key, num_steps)
+    carry = (state, jnp.zeros((), bool), first_shared)
+    _, (per_step, step_valid, terminated) = jax.lax.scan(body, carry, keys)
+    episode = episode_metrics(per_step, step_valid, metrics_config)
+    return Rollout(per_step=per_step, step_valid=step_valid, terminated=terminated, episode=episode)
+
+
+@functools.lru_cache(maxsize=16)
+def make_rollout_fn(env, policy: Policy, metrics_config: MetricsConfig,
+                    obs_config: ObservationConfig) -> Callable[[SimulatorState, jax.Array], Rollout]:
+    """Jitted batched episodes: states (B, ...), keys (B, 2) -> Rollout with leading axis B."""
+    episode = functools.partial(run_episode, env, policy, metrics_config=metrics_config, obs_config=obs_config)
+    return jax.jit(jax.vmap(episode))
