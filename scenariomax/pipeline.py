@@ -64,6 +64,7 @@ class UnitResult:
     records: tuple[bytes, ...] | None  # in-memory records (ray engine)
     num_records: int
     failures: tuple[Failure, ...]
+    peak_rss_mib: float = 0.0  # the worker's peak resident memory so far (reported in the manifest)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -142,14 +143,20 @@ def convert_unit_to_file(source: Source, unit: str, work_dir: str, sizes: Sizes,
             writer.write(record)
         count = writer.num_records
     os.replace(temp, final)
-    return UnitResult(unit, str(final), None, count, tuple(failures))
+    return UnitResult(unit, str(final), None, count, tuple(failures), _peak_rss_mib())
 
 
 def convert_unit_in_memory(source: Source, unit: str, sizes: Sizes, transform: Transform | None) -> UnitResult:
     """Ray task body: records travel back through the object store (works across machines)."""
     failures: list[Failure] = []
     records = tuple(_iter_unit_records(source, unit, sizes, transform, failures))
-    return UnitResult(unit, None, records, len(records), tuple(failures))
+    return UnitResult(unit, None, records, len(records), tuple(failures), _peak_rss_mib())
+
+
+def _peak_rss_mib() -> float:
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
 
 
 def _convert_unit_star(args) -> UnitResult:
@@ -233,6 +240,8 @@ class _ShardSink:
         if result.records_path:
             Path(result.records_path).unlink(missing_ok=True)
         self.unit_state(result.unit)["num_records"] = result.num_records
+        self.manifest["peak_worker_rss_mib"] = round(max(self.manifest.get("peak_worker_rss_mib", 0.0),
+                                                         result.peak_rss_mib), 1)
         self.pending_failures[result.unit] = [dataclasses.asdict(f) for f in result.failures]
         self.finished_units.add(result.unit)
         if result.unit not in self.open_units:

@@ -2,9 +2,11 @@
 
 Scenes are random but plausible (straight multi-lane roads crossing the region, vehicles driving
 along lanes, lights, SDC paths), generated in numpy; the map index is built once per scene on the
-host. The step is a minimal local one on plain arrays (kinematic bicycle for the SDC, log replay
-for everyone else) until the env is wired in. Timings run inside a jitted `lax.scan` over steps
-and `vmap` over the batch; compile time is reported separately.
+host. Two env steps are timed: "real" is part A's `Environment.step` on a `SimulatorState` with
+metrics and observation read through `vmax_sim.env.metrics_adapter` (the product path);
+"minimal" is a local step on plain arrays (kinematic bicycle for the SDC, log replay for everyone
+else), the lower bound. Timings run inside a jitted `lax.scan` over steps and `vmap` over the
+batch; compile time is reported separately.
 """
 
 from __future__ import annotations
@@ -26,6 +28,15 @@ from scenariomax.schema import (
     TL_GO,
     TL_STOP,
 )
+from vmax_sim.datatypes import (
+    Action,
+    ObjectMetadata,
+    Paths,
+    RoadgraphPoints,
+    SimulatorState,
+    TrafficLights,
+    Trajectory,
+)
 from vmax_sim.map_index import (
     MapIndex,
     MapIndexConfig,
@@ -36,7 +47,8 @@ from vmax_sim.map_index import (
 from vmax_sim.metrics import MetricsConfig, StepInputs, shared_queries, step_metrics
 from vmax_sim.observation import ObservationConfig, ObservationInputs, observe
 
-__all__ = ["CONFIGS", "format_table", "make_scene", "make_step_fn", "run_bench", "synthetic_scene"]
+__all__ = ["CONFIGS", "format_table", "make_real_step_fn", "make_scene", "make_step_fn", "run_bench", "scene_state",
+           "synthetic_scene"]
 
 NUM_STEPS_LOG = 91
 LANE_WIDTH = 3.7
@@ -237,7 +249,89 @@ def make_step_fn(with_observation: bool, with_metrics: bool, metrics_config: Met
     return step
 
 
-def _time_config(scenes: BenchScene, step_fn, steps: int, repeats: int = 3) -> tuple[float, float]:
+# ----------------------------------------------------------------------------- the real environment
+
+
+def scene_state(arrays: dict, scene: BenchScene) -> SimulatorState:
+    """The same scene as a real `SimulatorState` at timestep HISTORY - 1 (the map index is shared)."""
+    num_objects, num_steps = arrays["obj_valid"].shape
+    full = lambda a: np.broadcast_to(np.asarray(a, np.float32)[:, None], (num_objects, num_steps))  # noqa: E731
+    log = Trajectory(
+        x=arrays["obj_xy"][..., 0], y=arrays["obj_xy"][..., 1], z=np.zeros((num_objects, num_steps), np.float32),
+        vel_x=arrays["obj_vel"][..., 0], vel_y=arrays["obj_vel"][..., 1], yaw=arrays["obj_yaw"],
+        length=full(arrays["obj_size"][:, 0]), width=full(arrays["obj_size"][:, 1]), height=full(np.full(num_objects, 1.6)),
+        valid=arrays["obj_valid"],
+        timestamp_micros=np.broadcast_to(np.arange(num_steps, dtype=np.int32) * 100_000, (num_objects, num_steps)))
+    is_sdc = np.arange(num_objects) == 0
+    metadata = ObjectMetadata(ids=np.arange(num_objects, dtype=np.int32), object_types=arrays["obj_type"],
+                              is_sdc=is_sdc, is_controlled=is_sdc, is_controllable=is_sdc,
+                              is_valid=np.ones(num_objects, bool), objects_of_interest=np.zeros(num_objects, bool))
+    xyz, dirs = arrays["xyz"], arrays["dir"]
+    roadgraph = RoadgraphPoints(x=xyz[:, 0], y=xyz[:, 1], z=xyz[:, 2], dir_x=dirs[:, 0], dir_y=dirs[:, 1],
+                                dir_z=dirs[:, 2], types=arrays["types"].astype(np.int32), ids=arrays["ids"].astype(np.int32),
+                                valid=arrays["valid"], speed_limit=arrays["speed_limit"])
+    num_lights = arrays["light_xy"].shape[0]
+    over_time = lambda a: np.broadcast_to(np.asarray(a)[:, None], (num_lights, num_steps))  # noqa: E731
+    lights = TrafficLights(x=over_time(arrays["light_xy"][:, 0]), y=over_time(arrays["light_xy"][:, 1]),
+                           z=over_time(np.zeros(num_lights, np.float32)), state=over_time(arrays["light_state"]),
+                           lane_ids=over_time(arrays["light_lane_id"]), valid=over_time(arrays["light_valid"]))
+    path_xy = arrays["path_xy"]
+    paths = Paths(x=path_xy[..., 0], y=path_xy[..., 1], z=np.zeros(path_xy.shape[:2], np.float32),
+                  ids=np.full(path_xy.shape[:2], -1, np.int32), valid=arrays["path_valid"], arc_length=arrays["path_arc"],
+                  on_route=arrays["path_on_route"])
+    state = SimulatorState(log_trajectory=log, sim_trajectory=log, object_metadata=metadata, roadgraph_points=roadgraph,
+                           log_traffic_light=lights, sdc_paths=paths, map_index=scene.map_index,
+                           timestep=np.asarray(HISTORY - 1, np.int32))
+    return jax.tree_util.tree_map(jnp.asarray, state)
+
+
+@flax.struct.dataclass
+class RealScene:
+    state: SimulatorState  # the scenario at its first policy step
+    path_log_arc: jnp.ndarray  # (P, 2), computed once per episode
+
+
+def make_real_step_fn(with_observation: bool, with_metrics: bool, num_objects: int = 64,
+                      metrics_config: MetricsConfig | None = None, obs_config: ObservationConfig | None = None):
+    """One scene-step of the real `Environment.step`, then (optionally) metrics and observation via the adapter."""
+    from vmax_sim.env import EnvConfig, Environment
+    from vmax_sim.env.metrics_adapter import observation_inputs, step_inputs
+
+    metrics_config = metrics_config or MetricsConfig()
+    obs_config = obs_config or ObservationConfig()
+    env = Environment(EnvConfig(max_num_objects=num_objects, init_steps=HISTORY))
+
+    def step(scene: RealScene, state: SimulatorState, action):
+        is_sdc = state.object_metadata.is_sdc
+        full_action = Action(data=jnp.where(is_sdc[:, None], action[None], 0.0), valid=is_sdc[:, None])
+        state = env.step(state, full_action)
+        out = jnp.sum(state.current_sim_trajectory.x)  # keeps the log replay alive in the env-only config
+        shared = None
+        if with_metrics:
+            inputs = step_inputs(state, scene.path_log_arc)
+            shared = shared_queries(inputs, metrics_config)
+            values = step_metrics(state.map_index, inputs, metrics_config, shared)
+            out = out + sum(values.values())
+        if with_observation:
+            obs = observe(state.map_index, observation_inputs(state, obs_config.num_history), obs_config,
+                          candidates=(shared.candidate_index, shared.candidate_valid) if shared else None,
+                          path_projection=shared.path_projection if shared else None)
+            out = out + jnp.sum(obs.objects) + jnp.sum(obs.roadgraph) + jnp.sum(obs.lights) + jnp.sum(obs.path_targets)
+        return state, out
+
+    return step
+
+
+def _real_scenes(batch: int, num_objects: int, num_roadgraph: int, num_distinct: int = 4) -> RealScene:
+    distinct = []
+    for seed in range(min(batch, num_distinct)):
+        arrays = synthetic_scene(num_roadgraph, num_objects, seed)
+        scene = make_scene(arrays)
+        distinct.append(RealScene(state=scene_state(arrays, scene), path_log_arc=scene.path_log_arc))
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack([xs[i % len(xs)] for i in range(batch)]), *distinct)
+
+
+def _time_config(scenes, step_fn, steps: int, repeats: int = 3, init_fn=None) -> tuple[float, float]:
     """(compile seconds, best scene-steps/s) of `steps` batched steps in a jitted scan."""
     batch = jax.tree_util.tree_leaves(scenes)[0].shape[0]
     action = jnp.tile(jnp.asarray([[0.2, 0.001]], jnp.float32), (batch, 1))
@@ -249,7 +343,7 @@ def _time_config(scenes: BenchScene, step_fn, steps: int, repeats: int = 3) -> t
             return state, jnp.sum(out)
         return jax.lax.scan(body, state, None, length=steps)
 
-    state = jax.vmap(initial_state)(scenes)
+    state = jax.vmap(init_fn or initial_state)(scenes)
     start = time.perf_counter()
     compiled = rollout.lower(scenes, state).compile()
     compile_s = time.perf_counter() - start
@@ -271,26 +365,35 @@ CONFIGS = {"env": (False, False), "env+obs": (True, False), "env+metrics": (Fals
            "env+metrics+obs": (True, True)}
 
 
+def _timed(kind: str, batch: int, num_objects: int, roadgraph: int, config: str, steps: int) -> dict:
+    with_obs, with_metrics = CONFIGS[config]
+    if kind == "real":
+        scenes = _real_scenes(batch, num_objects, roadgraph)
+        compile_s, sps = _time_config(scenes, make_real_step_fn(with_obs, with_metrics, num_objects), steps,
+                                      init_fn=lambda scene: scene.state)
+    else:
+        scenes = _batched_scenes(batch, num_objects, roadgraph)
+        compile_s, sps = _time_config(scenes, make_step_fn(with_obs, with_metrics), steps)
+    return {"env": kind, "config": config, "batch": batch, "roadgraph": roadgraph,
+            "compile_s": round(compile_s, 2), "scene_steps_per_s": round(sps)}
+
+
 def run_bench(batch_sizes=(1, 32, 256), num_objects: int = 64, roadgraph_sizes=(5000, 15000, 30000),
-              steps: int = 80, json: bool = False, configs=tuple(CONFIGS)) -> dict:
+              steps: int = 80, json: bool = False, configs=tuple(CONFIGS), env_kinds=("real",)) -> dict:
     """Time every configuration at each batch size (largest roadgraph), then the full step at
-    each roadgraph size (batch 32 or the nearest given). Prints a table (or JSON) and returns
-    {"device", "configs": [...], "roadgraph_scaling": [...]}."""
+    each roadgraph size (batch 32 or the nearest given), for each env kind ("real": part A's
+    Environment.step via the metrics adapter; "minimal": the local array step). Prints a table
+    (or JSON) and returns {"device", "configs": [...], "roadgraph_scaling": [...]}."""
     device = f"{jax.devices()[0].platform}:{jax.devices()[0].device_kind}"
     results = {"device": device, "num_objects": num_objects, "steps": steps, "configs": [], "roadgraph_scaling": []}
     biggest = max(roadgraph_sizes)
-    for batch in batch_sizes:
-        scenes = _batched_scenes(batch, num_objects, biggest)
-        for name in configs:
-            compile_s, sps = _time_config(scenes, make_step_fn(*CONFIGS[name]), steps)
-            results["configs"].append({"config": name, "batch": batch, "roadgraph": biggest,
-                                       "compile_s": round(compile_s, 2), "scene_steps_per_s": round(sps)})
-    scaling_batch = min(batch_sizes, key=lambda b: abs(b - 32))
-    for size in roadgraph_sizes:
-        scenes = _batched_scenes(scaling_batch, num_objects, size)
-        compile_s, sps = _time_config(scenes, make_step_fn(True, True), steps)
-        results["roadgraph_scaling"].append({"config": "env+metrics+obs", "batch": scaling_batch, "roadgraph": size,
-                                             "compile_s": round(compile_s, 2), "scene_steps_per_s": round(sps)})
+    for kind in env_kinds:
+        for batch in batch_sizes:
+            for name in configs:
+                results["configs"].append(_timed(kind, batch, num_objects, biggest, name, steps))
+        scaling_batch = min(batch_sizes, key=lambda b: abs(b - 32))
+        for size in roadgraph_sizes:
+            results["roadgraph_scaling"].append(_timed(kind, scaling_batch, num_objects, size, "env+metrics+obs", steps))
     if json:
         print(json_lib.dumps(results, indent=2))
     else:
@@ -300,8 +403,8 @@ def run_bench(batch_sizes=(1, 32, 256), num_objects: int = 64, roadgraph_sizes=(
 
 def format_table(results: dict) -> str:
     lines = [f"device: {results['device']}  objects: {results['num_objects']}  steps: {results['steps']}",
-             f"{'config':<18}{'batch':>6}{'roadgraph':>10}{'compile s':>10}{'scene-steps/s':>15}"]
+             f"{'env':<9}{'config':<18}{'batch':>6}{'roadgraph':>10}{'compile s':>10}{'scene-steps/s':>15}"]
     for row in results["configs"] + results["roadgraph_scaling"]:
-        lines.append(f"{row['config']:<18}{row['batch']:>6}{row['roadgraph']:>10}{row['compile_s']:>10}"
+        lines.append(f"{row.get('env', 'minimal'):<9}{row['config']:<18}{row['batch']:>6}{row['roadgraph']:>10}{row['compile_s']:>10}"
                      f"{row['scene_steps_per_s']:>15,}")
     return "\n".join(lines)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 import json
 
 import chex
@@ -86,8 +85,11 @@ def test_no_recompiles_after_warm_up():
     env_config = EnvConfig(max_num_objects=8)
     env = make_environment(env_config)
     policy = make_policy("expert", env)
-    episode = chex.assert_max_traces(functools.partial(run_episode, env, policy, metrics_config=MetricsConfig(),
-                                                       obs_config=ObservationConfig()), n=1)
+
+    @chex.assert_max_traces(n=1)
+    def episode(state, key):
+        return run_episode(env, policy, state, key, MetricsConfig(), ObservationConfig())
+
     rollout_fn = jax.jit(jax.vmap(episode))
     keys = jax.random.split(jax.random.PRNGKey(0), 2)
     for batch in ([cruising_scenario("a"), braking_scenario("b")], [braking_scenario("c"), cruising_scenario("d", 7.0)]):

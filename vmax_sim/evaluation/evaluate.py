@@ -60,13 +60,18 @@ def _check_mode(mode: str) -> None:
 def _scenarios(data, num_scenarios: int | None) -> Iterator[Scenario]:
     if isinstance(data, (DataConfig, str)):
         path = data.path if isinstance(data, DataConfig) else data
+        if not path:
+            raise InputError("no data given: pass a shard directory, file or glob")
         stream: Iterable[Scenario] = read_shards(path)
     else:
         stream = data
-    for count, scenario in enumerate(stream):
-        if num_scenarios is not None and count >= num_scenarios:
-            return
-        yield scenario
+    try:
+        for count, scenario in enumerate(stream):
+            if num_scenarios is not None and count >= num_scenarios:
+                return
+            yield scenario
+    except FileNotFoundError as error:
+        raise InputError(str(error)) from None
 
 
 def _batches(data, config: DataConfig, num_scenarios: int | None) -> Iterator[tuple[list[str], SimulatorState, int]]:
