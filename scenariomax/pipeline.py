@@ -390,11 +390,14 @@ def convert(source: Source, settings: ConvertSettings) -> ConversionResult:
     """Runs a conversion (see module docstring). Returns counts; never raises for bad inputs."""
     start = time.perf_counter()
     out = Path(settings.out)
-    _prepare_out(out, settings.resume)
     try:
         units = list(source.list_units())
     except InputError as error:
         raise ConversionError(str(error)) from None
+    if not units:
+        where = getattr(source, "src", None)
+        raise ConversionError(f"{where + ': ' if where else ''}no {source.name} inputs found, nothing to convert")
+    _prepare_out(out, settings.resume)
     sink = _ShardSink(out, source, settings, units)
     if sink.manifest["state"] == "complete":
         todo: list[str] = []
