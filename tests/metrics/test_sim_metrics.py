@@ -160,6 +160,15 @@ def test_on_multiple_lanes_when_straddling_the_line(index):
     assert bool(on_multiple_lanes(straddle, jnp.array([0.0, 0.5 * LANE_WIDTH]), jnp.asarray(0.0), 2.0, 1.85, 30.0))
 
 
+def test_off_centre_in_a_narrow_lane_is_not_on_two_lanes(index):
+    # The boundary is LANE_WIDTH / 2 from the centre; a 2 m wide box whose centre is d from it crosses it by
+    # 1 - d metres, which counts only beyond the 0.3 m tolerance: d = 0.8 (crosses 0.2 m) no, d = 0.6 (0.4 m) yes.
+    inside = jnp.array([0.0, 0.5 * LANE_WIDTH - 0.8])
+    across = jnp.array([0.0, 0.5 * LANE_WIDTH - 0.6])
+    assert not bool(on_multiple_lanes(lane_candidates(index, inside), inside, jnp.asarray(0.0), 2.0, 1.85, 30.0))
+    assert bool(on_multiple_lanes(lane_candidates(index, across), across, jnp.asarray(0.0), 2.0, 1.85, 30.0))
+
+
 def test_red_light_crossing(index, metrics_fn):
     # the front bumper (2 m ahead of the centre) passes x = 2.5 between the last two steps
     sdc = ((-1.0, 0.0), (0.0, 0.0), (1.0, 0.0))

@@ -111,21 +111,34 @@ def speed_violation(speed: jnp.ndarray, speed_limit: jnp.ndarray) -> jnp.ndarray
     return jnp.where(speed_limit > 0.0, jnp.maximum(speed - speed_limit, 0.0), 0.0)
 
 
+BOUNDARY_TOLERANCE_M = 0.3
+
+
 def on_multiple_lanes(lanes: LaneCandidates, sdc_xy: jnp.ndarray, sdc_yaw: jnp.ndarray, sdc_width,
                       lane_half_width: float, max_angle_deg: float) -> jnp.ndarray:
-    """True when the SDC's box reaches into two side-by-side lanes.
+    """True when the SDC's box straddles the boundary between two side-by-side lanes.
 
-    A lane counts as occupied when its centreline is roughly parallel to the SDC and closer than
-    lane_half_width + width / 2; the SDC is on several lanes when the occupied centrelines sit
-    more than one lane-half-width apart sideways (successive segments of one lane line up, so
-    they never trigger it).
+    Without lane polygons, the boundary between two adjacent parallel centrelines is taken halfway
+    between them, so the rule uses the map's real lane spacing (real lanes are often narrower than
+    the standard 3.7 m). The adjacent lanes are the nearest parallel centrelines more than 1 m to each
+    side of the SDC's own lane (segments of one lane line up and never pair), at most
+    3.2 * lane_half_width away. The SDC straddles when its box crosses a boundary
+    by more than BOUNDARY_TOLERANCE_M (the midpoint is only an estimate of the painted line).
     """
     cos, sin = jnp.cos(sdc_yaw), jnp.sin(sdc_yaw)
     parallel = jnp.abs(lanes.dir_x * cos + lanes.dir_y * sin) > jnp.cos(jnp.deg2rad(max_angle_deg))
-    occupied = lanes.valid & parallel & (lanes.distance < lane_half_width + 0.5 * sdc_width)
-    offset = (lanes.closest_y - sdc_xy[1]) * cos - (lanes.closest_x - sdc_xy[0]) * sin  # to the SDC's left
-    spread = jnp.max(jnp.where(occupied, offset, -jnp.inf)) - jnp.min(jnp.where(occupied, offset, jnp.inf))
-    return jnp.isfinite(spread) & (spread > lane_half_width)
+    near = lanes.valid & parallel & (lanes.distance < 3.2 * lane_half_width + 0.5 * sdc_width)
+    offset = (lanes.closest_y - sdc_xy[1]) * cos - (lanes.closest_x - sdc_xy[0]) * sin  # (K,) to the SDC's left
+    own = jnp.argmin(jnp.where(near, jnp.abs(offset), jnp.inf))  # the lane the SDC's centre is in
+    own_offset = offset[own]
+    # The adjacent lanes: the nearest centrelines on each side of the SDC's own lane.
+    left = jnp.min(jnp.where(near & (offset > own_offset + 1.0), offset, jnp.inf))
+    right = jnp.max(jnp.where(near & (offset < own_offset - 1.0), offset, -jnp.inf))
+    max_spacing = 3.2 * lane_half_width
+    reach = 0.5 * sdc_width - BOUNDARY_TOLERANCE_M
+    crosses_left = (left - own_offset < max_spacing) & (jnp.abs(0.5 * (own_offset + left)) < reach)
+    crosses_right = (own_offset - right < max_spacing) & (jnp.abs(0.5 * (own_offset + right)) < reach)
+    return jnp.any(near) & (crosses_left | crosses_right)
 
 
 def red_light_violation(front_before: jnp.ndarray, front_now: jnp.ndarray, lane_id: jnp.ndarray,
