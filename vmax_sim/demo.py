@@ -24,7 +24,7 @@ def _convert(shards: Path, num_scenarios: int, seed: int, workers: int | None, n
 
     sizes = Sizes(num_objects=num_objects)
     transform, transform_settings = make_transform()
-    settings = ConvertSettings(out=shards, workers=workers, sizes=sizes, progress=False, transform=transform,
+    settings = ConvertSettings(out=shards, workers=workers, sizes=sizes, progress=True, transform=transform,
                                transform_settings=transform_settings)
     return convert(SyntheticSource(num_scenarios=num_scenarios, seed=seed, sizes=sizes), settings)
 
