@@ -67,8 +67,8 @@ def bench_synthetic(num: int = 40) -> dict:
 
 
 def bench_source(dataset: str, src: Path, repeats: int = 5) -> dict:
-    from scenariomax.pipeline import prepare_scenario
     from scenariomax.enrich.transform import make_transform
+    from scenariomax.pipeline import prepare_scenario
     from scenariomax.schema import Sizes
     from scenariomax.sources.base import Failure
     from scenariomax.sources.registry import make_source
@@ -114,7 +114,8 @@ def main() -> None:
     print("synthetic: generate {generate_per_s:.1f}/s, enrich {enrich_per_s:.1f}/s, encode {encode_per_s:.1f}/s, "
           "end to end {end_to_end_per_s:.1f}/s".format(**syn))
     for name, values in report["sources"].items():
-        print(f"{name}: " + ", ".join(f"{k} {v:.1f}" if isinstance(v, float) else f"{k} {v}" for k, v in values.items()))
+        print(f"{name}: " + ", ".join(f"{k} {v:.1f}" if isinstance(v, float) else f"{k} {v}"
+                                      for k, v in values.items()))
 
 
 if __name__ == "__main__":

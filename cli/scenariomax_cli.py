@@ -25,7 +25,7 @@ class _OneLineErrors(click.Group):
             return super().invoke(ctx)
         except (ConversionError, InputError, RecordError, ShardReadError, SchemaError, FileNotFoundError,
                 NotADirectoryError, PermissionError) as error:
-            raise click.ClickException(str(error).splitlines()[0] if str(error) else type(error).__name__)
+            raise click.ClickException(str(error).splitlines()[0] if str(error) else type(error).__name__) from error
 
 
 @click.group(cls=_OneLineErrors)

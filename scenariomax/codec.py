@@ -118,7 +118,8 @@ def features_to_scenario(features: dict, sizes: Sizes | None = None) -> Scenario
     """Builds a Scenario from decoded features; raises SchemaError on missing keys or bad sizes."""
     missing = [key for key in _required_keys() if key not in features]
     if missing:
-        raise SchemaError(f"missing feature {missing[0]}" + (f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""))
+        raise SchemaError(f"missing feature {missing[0]}"
+                          + (f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""))
     sizes = sizes or infer_sizes(features)
     dims = sizes.as_dict()
     num_timesteps = sizes.num_timesteps

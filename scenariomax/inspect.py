@@ -340,7 +340,8 @@ def format_report(stats: dict) -> str:
     lines = [f"Shards: {stats['path']}"]
     summary_rows = [
         ("files", _fmt(stats["num_files"])),
-        ("records", _fmt(stats["num_records"]) + (f" (first {stats['max_records']})" if "max_records" in stats else "")),
+        ("records",
+         _fmt(stats["num_records"]) + (f" (first {stats['max_records']})" if "max_records" in stats else "")),
         ("scenarios decoded", _fmt(n)),
         ("sources", ", ".join(f"{k} {v}" for k, v in stats["source_datasets"].items()) or "-"),
     ]

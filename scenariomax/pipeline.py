@@ -19,16 +19,16 @@ import os
 import shutil
 import time
 from collections import deque
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
 
 from scenariomax.codec import encode_scenario
 from scenariomax.enrich.budget import fit_to_budget
 from scenariomax.io.tfrecord import TFRecordWriter, iter_records
-from scenariomax.schema import Sizes, load_schema
 from scenariomax.scenario import Scenario
+from scenariomax.schema import Sizes, load_schema
 from scenariomax.shards import shard_name
 from scenariomax.sources.base import Failure, InputError, Source
 
@@ -416,7 +416,8 @@ def convert(source: Source, settings: ConvertSettings) -> ConversionResult:
         for result in results:
             written = sink.add_unit_result(result)
             progress.update(written)
-            progress.set_postfix(failures=len(sink.manifest["failures"]) + sum(map(len, sink.pending_failures.values())))
+            progress.set_postfix(
+                failures=len(sink.manifest["failures"]) + sum(map(len, sink.pending_failures.values())))
     finally:
         progress.close()
     shards = sink.finalize()

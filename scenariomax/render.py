@@ -276,7 +276,8 @@ def _draw_lights(ax, s: Scenario, t: int, handles: dict) -> None:
 
 
 def _ordered(handles: dict) -> tuple[list, list[str]]:
-    labels = sorted(handles, key=lambda label: LEGEND_ORDER.index(label) if label in LEGEND_ORDER else len(LEGEND_ORDER))
+    labels = sorted(handles,
+                    key=lambda label: LEGEND_ORDER.index(label) if label in LEGEND_ORDER else len(LEGEND_ORDER))
     return [handles[label] for label in labels], labels
 
 

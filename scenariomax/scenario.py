@@ -106,14 +106,14 @@ class Scenario:
             raise ValueError(f"scenario {self.scenario_id}: expected one SDC, found {indices.size}")
         return int(indices[0])
 
-    def replace(self, **changes) -> "Scenario":
+    def replace(self, **changes) -> Scenario:
         return dataclasses.replace(self, **changes)
 
     def validate(self) -> list[str]:
         """Every inconsistency found, as human-readable lines (empty when the scenario is sound)."""
         return validate_scenario(self)
 
-    def equals(self, other: "Scenario") -> bool:
+    def equals(self, other: Scenario) -> bool:
         """Field-by-field equality (NaN-aware), ignoring `metadata`."""
         for field in dataclasses.fields(self):
             if field.name == "metadata":

@@ -9,9 +9,9 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 
@@ -124,7 +124,7 @@ class Sizes:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, values: Mapping[str, int]) -> "Sizes":
+    def from_dict(cls, values: Mapping[str, int]) -> Sizes:
         known = {f.name for f in dataclasses.fields(cls)}
         return cls(**{k: int(v) for k, v in values.items() if k in known})
 

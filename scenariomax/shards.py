@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import glob
 import os
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Iterable, Iterator
 
 from scenariomax.codec import SchemaError, decode_scenario, encode_scenario
 from scenariomax.io.example import ExampleError

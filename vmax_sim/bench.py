@@ -114,11 +114,15 @@ def synthetic_scene(num_roadgraph: int, num_objects: int = 64, seed: int = 0) ->
     lights_state = np.where(np.arange(16) % 2 == 0, TL_STOP, TL_GO).astype(np.int32)
 
     px = np.linspace(-60, 240, 300)
-    path_xy = np.stack([np.stack([px, np.full(300, -k * 0.5 * LANE_WIDTH)], -1) for k in range(1, 11)]).astype(np.float32)
+    path_xy = np.stack([np.stack([px, np.full(300, -k * 0.5 * LANE_WIDTH)], -1)
+                        for k in range(1, 11)]).astype(np.float32)
     path_valid = np.ones((10, 300), bool)
-    return {"xyz": xyz, "dir": dirs, "types": types, "ids": ids, "valid": np.ones(len(xy), bool), "speed_limit": speed_limit,
-                "obj_xy": obj_xy, "obj_yaw": obj_yaw, "obj_vel": obj_vel.astype(np.float32), "obj_size": size.astype(np.float32),
-                "obj_type": np.full(num_objects, OBJECT_TYPE_VEHICLE, np.int32), "obj_valid": np.ones(obj_x.shape, bool),
+    return {"xyz": xyz, "dir": dirs, "types": types, "ids": ids, "valid": np.ones(len(xy), bool),
+                "speed_limit": speed_limit,
+                "obj_xy": obj_xy, "obj_yaw": obj_yaw, "obj_vel": obj_vel.astype(np.float32),
+                "obj_size": size.astype(np.float32),
+                "obj_type": np.full(num_objects, OBJECT_TYPE_VEHICLE, np.int32),
+                "obj_valid": np.ones(obj_x.shape, bool),
                 "light_xy": lights_xy, "light_lane_id": np.full(16, 0, np.int32), "light_state": lights_state,
                 "light_valid": np.ones(16, bool), "path_xy": path_xy, "path_valid": path_valid,
                 "path_arc": path_arc_length(path_xy, path_valid),
@@ -260,7 +264,8 @@ def scene_state(arrays: dict, scene: BenchScene) -> SimulatorState:
     log = Trajectory(
         x=arrays["obj_xy"][..., 0], y=arrays["obj_xy"][..., 1], z=np.zeros((num_objects, num_steps), np.float32),
         vel_x=arrays["obj_vel"][..., 0], vel_y=arrays["obj_vel"][..., 1], yaw=arrays["obj_yaw"],
-        length=full(arrays["obj_size"][:, 0]), width=full(arrays["obj_size"][:, 1]), height=full(np.full(num_objects, 1.6)),
+        length=full(arrays["obj_size"][:, 0]), width=full(arrays["obj_size"][:, 1]),
+        height=full(np.full(num_objects, 1.6)),
         valid=arrays["obj_valid"],
         timestamp_micros=np.broadcast_to(np.arange(num_steps, dtype=np.int32) * 100_000, (num_objects, num_steps)))
     is_sdc = np.arange(num_objects) == 0
@@ -269,7 +274,8 @@ def scene_state(arrays: dict, scene: BenchScene) -> SimulatorState:
                               is_valid=np.ones(num_objects, bool), objects_of_interest=np.zeros(num_objects, bool))
     xyz, dirs = arrays["xyz"], arrays["dir"]
     roadgraph = RoadgraphPoints(x=xyz[:, 0], y=xyz[:, 1], z=xyz[:, 2], dir_x=dirs[:, 0], dir_y=dirs[:, 1],
-                                dir_z=dirs[:, 2], types=arrays["types"].astype(np.int32), ids=arrays["ids"].astype(np.int32),
+                                dir_z=dirs[:, 2], types=arrays["types"].astype(np.int32),
+                                ids=arrays["ids"].astype(np.int32),
                                 valid=arrays["valid"], speed_limit=arrays["speed_limit"])
     num_lights = arrays["light_xy"].shape[0]
     over_time = lambda a: np.broadcast_to(np.asarray(a)[:, None], (num_lights, num_steps))  # noqa: E731
@@ -278,7 +284,8 @@ def scene_state(arrays: dict, scene: BenchScene) -> SimulatorState:
                            lane_ids=over_time(arrays["light_lane_id"]), valid=over_time(arrays["light_valid"]))
     path_xy = arrays["path_xy"]
     paths = Paths(x=path_xy[..., 0], y=path_xy[..., 1], z=np.zeros(path_xy.shape[:2], np.float32),
-                  ids=np.full(path_xy.shape[:2], -1, np.int32), valid=arrays["path_valid"], arc_length=arrays["path_arc"],
+                  ids=np.full(path_xy.shape[:2], -1, np.int32), valid=arrays["path_valid"],
+                  arc_length=arrays["path_arc"],
                   on_route=arrays["path_on_route"])
     state = SimulatorState(log_trajectory=log, sim_trajectory=log, object_metadata=metadata, roadgraph_points=roadgraph,
                            log_traffic_light=lights, sdc_paths=paths, map_index=scene.map_index,
@@ -368,7 +375,8 @@ def _time_config(scenes, step_fn, steps: int, repeats: int = 5, init_fn=None) ->
 
 
 def _batched_scenes(batch: int, num_objects: int, num_roadgraph: int, num_distinct: int = 4) -> BenchScene:
-    distinct = [make_scene(synthetic_scene(num_roadgraph, num_objects, seed)) for seed in range(min(batch, num_distinct))]
+    distinct = [make_scene(synthetic_scene(num_roadgraph, num_objects, seed))
+                for seed in range(min(batch, num_distinct))]
     return jax.tree_util.tree_map(lambda *xs: jnp.stack([xs[i % len(xs)] for i in range(batch)]), *distinct)
 
 
@@ -404,7 +412,8 @@ def run_bench(batch_sizes=(1, 32, 256), num_objects: int = 64, roadgraph_sizes=(
                 results["configs"].append(_timed(kind, batch, num_objects, biggest, name, steps))
         scaling_batch = min(batch_sizes, key=lambda b: abs(b - 32))
         for size in roadgraph_sizes:
-            results["roadgraph_scaling"].append(_timed(kind, scaling_batch, num_objects, size, "env+metrics+obs", steps))
+            results["roadgraph_scaling"].append(
+                _timed(kind, scaling_batch, num_objects, size, "env+metrics+obs", steps))
     if json:
         print(json_lib.dumps(results, indent=2))
     else:
@@ -416,6 +425,6 @@ def format_table(results: dict) -> str:
     lines = [f"device: {results['device']}  objects: {results['num_objects']}  steps: {results['steps']}",
              f"{'env':<9}{'config':<18}{'batch':>6}{'roadgraph':>10}{'compile s':>10}{'scene-steps/s':>15}"]
     for row in results["configs"] + results["roadgraph_scaling"]:
-        lines.append(f"{row.get('env', 'minimal'):<9}{row['config']:<18}{row['batch']:>6}{row['roadgraph']:>10}{row['compile_s']:>10}"
-                     f"{row['scene_steps_per_s']:>15,}")
+        lines.append(f"{row.get('env', 'minimal'):<9}{row['config']:<18}{row['batch']:>6}{row['roadgraph']:>10}"
+                     f"{row['compile_s']:>10}{row['scene_steps_per_s']:>15,}")
     return "\n".join(lines)

@@ -96,7 +96,8 @@ class MapIndex:
     # edge, only for cells whose query window holds no edge (0 elsewhere: never read)
     # observation points stored ready to use (array of structures): the per-step transform is one
     # small matmul, and no per-step transpose into the (points, features) layout is needed
-    obs_features: jnp.ndarray  # (Go, Go, Co, 8) float32, [x, y, dir x, dir y, speed limit (0 unknown), is edge, is lane, is line]
+    # (Go, Go, Co, 8) float32, [x, y, dir x, dir y, speed limit (0 unknown), is edge, is lane, is line]
+    obs_features: jnp.ndarray
     obs_type: jnp.ndarray  # (Go, Go, Co) int32
     obs_speed_limit: jnp.ndarray  # (Go, Go, Co) float32, m/s, -1 unknown
     obs_valid: jnp.ndarray  # (Go, Go, Co) bool

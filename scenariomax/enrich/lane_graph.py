@@ -116,7 +116,8 @@ def _neighbor_pairs(lanes: Lanes, edge_xy: np.ndarray, settings: LaneGraphSettin
     along = np.abs((offset * sample_dir[other]).sum(-1))
     cos_heading = (sample_dir[rows] * sample_dir[other]).sum(-1)
     ok = ((lateral >= settings.neighbor_min_m) & (lateral <= settings.neighbor_max_m)
-          & (along <= settings.neighbor_sample_spacing_m) & (cos_heading > np.cos(np.radians(settings.neighbor_heading_deg))))
+          & (along <= settings.neighbor_sample_spacing_m)
+          & (cos_heading > np.cos(np.radians(settings.neighbor_heading_deg))))
     rows, other, offset = rows[ok], other[ok], offset[ok]
     if len(edge_xy) and len(rows):
         midpoints = sample_xy[rows] + 0.5 * offset

@@ -297,7 +297,8 @@ def search_paths(lanes: Lanes, graph: LaneGraph, position: np.ndarray, yaw: floa
         seen.add(key)
         if len(track) and len(xyz) > 1:
             dist = project_to_polyline(track, xyz)[0]
-            mean, on_route = float(dist.mean()), bool(np.mean(dist <= settings.on_route_tolerance_m) >= settings.on_route_fraction)
+            mean, on_route = (float(dist.mean()),
+                              bool(np.mean(dist <= settings.on_route_tolerance_m) >= settings.on_route_fraction))
         else:
             mean, on_route = 0.0, len(track) == 0
         paths.append(Path(xyz, lane_id, arc, mean, on_route))

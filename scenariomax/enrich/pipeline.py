@@ -50,7 +50,8 @@ class EnrichSettings:
 
 def _sdc_paths(scenario: Scenario, lanes, graph, settings: EnrichSettings) -> dict:
     sdc, start = scenario.sdc_index, scenario.current_time_index
-    track, track_yaw = logged_track(scenario.x[sdc], scenario.y[sdc], scenario.bbox_yaw[sdc], scenario.valid[sdc], start)
+    track, track_yaw = logged_track(scenario.x[sdc], scenario.y[sdc], scenario.bbox_yaw[sdc], scenario.valid[sdc],
+                                    start)
     position = np.array([scenario.x[sdc, start], scenario.y[sdc, start], scenario.z[sdc, start]])
     paths = search_paths(lanes, graph, position, float(scenario.bbox_yaw[sdc, start]), track, track_yaw,
                          settings.path_settings())

@@ -8,7 +8,7 @@ a fixed spacing and compute unit direction vectors, so every dataset shares one 
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

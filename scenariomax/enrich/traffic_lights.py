@@ -79,9 +79,11 @@ def light_evidence(scenario: Scenario, stop: np.ndarray, direction: np.ndarray,
     for step in np.flatnonzero(crossed.any(axis=0)) + 1:
         green[max(step - settings.green_window, 0):step + settings.green_window + 1] = True
     speed = np.hypot(scenario.velocity_x, scenario.velocity_y)
-    queued = (on_lane & (along < 0) & (along >= -settings.queue_distance_m) & (speed < settings.stopped_speed_mps)).any(0)
+    queued = (on_lane & (along < 0) & (along >= -settings.queue_distance_m)
+              & (speed < settings.stopped_speed_mps)).any(0)
     dist = np.hypot(rel_x, rel_y)
-    crossing = valid & (dist <= settings.cross_radius_m) & (speed > settings.cross_speed_mps) & (np.abs(heading_cos) < 0.5)
+    crossing = (valid & (dist <= settings.cross_radius_m) & (speed > settings.cross_speed_mps)
+                & (np.abs(heading_cos) < 0.5))
     red = queued & crossing.any(axis=0)
     green, red = _fill_gaps(green, settings.max_gap_steps), _fill_gaps(red, settings.max_gap_steps)
     conflict = green & red

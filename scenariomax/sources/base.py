@@ -9,7 +9,8 @@ the same records.
 from __future__ import annotations
 
 import dataclasses
-from typing import Iterator, Protocol, Union
+from collections.abc import Iterator
+from typing import Protocol, Union
 
 
 class InputError(ValueError):

@@ -6,7 +6,7 @@ Used by `scenariomax build-sdc-paths` to enrich existing data through the same p
 from __future__ import annotations
 
 import dataclasses
-from typing import Iterator
+from collections.abc import Iterator
 
 from scenariomax.codec import SchemaError, decode_scenario
 from scenariomax.io.example import ExampleError

@@ -35,7 +35,10 @@ def track(xy: np.ndarray, valid=None, object_type: int = 1) -> dict:
 def make_scenario(polylines: list[MapPolyline], objects: list[dict], **extra) -> Scenario:
     """Object 0 is the SDC."""
     n = len(objects)
-    stack = lambda key, k=None: np.stack([o[key] if k is None else o[key][:, k] for o in objects])
+
+    def stack(key, k=None):
+        return np.stack([o[key] if k is None else o[key][:, k] for o in objects])
+
     valid = stack("valid")
     return Scenario(
         scenario_id="hand", object_id=np.arange(n), object_type=np.array([o["type"] for o in objects]),

@@ -16,7 +16,8 @@ FAST = EnrichSettings(label_controllable=False, infer_lights=False)
 
 
 def _two_lanes(length=400.0):
-    return [MapPolyline(1, LANE, line((0, 0), (length, 0), 400)), MapPolyline(2, LANE, line((0, 3.5), (length, 3.5), 400))]
+    return [MapPolyline(1, LANE, line((0, 0), (length, 0), 400)),
+            MapPolyline(2, LANE, line((0, 3.5), (length, 3.5), 400))]
 
 
 def _lane_change_xy():

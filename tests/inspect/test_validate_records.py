@@ -146,7 +146,8 @@ def test_truncated_file_is_reported_and_validation_continues(tmp_path):
     assert report.num_records == 3  # 1 from the damaged file + 2 from the next one
     (entry,) = report.bad
     assert entry.file == str(first) and entry.record_index == 1 and entry.scenario_id == ""
-    assert entry.reason == f"{first}: truncated record at byte {record_bytes} (expected {record_bytes - 16} bytes of data)"
+    assert entry.reason == (f"{first}: truncated record at byte {record_bytes} "
+                            f"(expected {record_bytes - 16} bytes of data)")
     assert "truncated record" in format_validation(report)
 
 

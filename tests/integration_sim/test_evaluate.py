@@ -92,7 +92,8 @@ def test_no_recompiles_after_warm_up():
 
     rollout_fn = jax.jit(jax.vmap(episode))
     keys = jax.random.split(jax.random.PRNGKey(0), 2)
-    for batch in ([cruising_scenario("a"), braking_scenario("b")], [braking_scenario("c"), cruising_scenario("d", 7.0)]):
+    for batch in ([cruising_scenario("a"), braking_scenario("b")],
+                  [braking_scenario("c"), cruising_scenario("d", 7.0)]):
         jax.block_until_ready(rollout_fn(scenarios_to_batch(batch, config), keys))
 
 

@@ -215,9 +215,9 @@ def test_kinematic_infeasibility(index, metrics_fn):
 
 
 def _episode(**overrides):
-    base = {"at_fault_collision": 0.0, "offroad": 0.0, "red_light": 0.0, "making_progress": 1.0, "driving_direction": 1.0,
-                "ttc_within_bound": 1.0, "ego_progress": 1.0, "speed_limit_compliance": 1.0, "comfort": 1.0,
-                "multiple_lanes_score": 1.0}
+    base = {"at_fault_collision": 0.0, "offroad": 0.0, "red_light": 0.0, "making_progress": 1.0,
+                "driving_direction": 1.0, "ttc_within_bound": 1.0, "ego_progress": 1.0, "speed_limit_compliance": 1.0,
+                "comfort": 1.0, "multiple_lanes_score": 1.0}
     base.update(overrides)
     return {k: jnp.asarray(v, jnp.float32) for k, v in base.items()}
 

@@ -100,7 +100,8 @@ def test_packed_roadgraph_keeps_a_fixed_number_of_points(index):
     assert 8 <= int(obs.roadgraph_valid.sum()) <= 16  # evenly thinned: every stride-th in-box point
     source, filled = compact(jnp.array([True, False, True, True, False, True]), 3)
     # 4 valid entries into 3 slots: stride 2 keeps the 1st and 3rd valid entries
-    assert np.asarray(source)[np.asarray(filled)].tolist() == [0, 3] and np.asarray(filled).tolist() == [True, True, False]
+    assert (np.asarray(source)[np.asarray(filled)].tolist() == [0, 3]
+            and np.asarray(filled).tolist() == [True, True, False])
 
 
 def test_closest_lights_and_path_targets(index):

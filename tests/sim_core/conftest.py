@@ -56,8 +56,12 @@ def make_scenario(seed: int = 0, scenario_id: str | None = None, num_objects: in
     rng = np.random.default_rng(seed + 1000)
     n, t = num_objects, NUM_STEPS
     steps = np.arange(t) * DT
-    x = np.zeros((n, t)); y = np.zeros((n, t)); yaw = np.zeros((n, t))
-    vx = np.zeros((n, t)); vy = np.zeros((n, t)); valid = np.ones((n, t), bool)
+    x = np.zeros((n, t))
+    y = np.zeros((n, t))
+    yaw = np.zeros((n, t))
+    vx = np.zeros((n, t))
+    vy = np.zeros((n, t))
+    valid = np.ones((n, t), bool)
     x[0], y[0], yaw[0], vx[0], vy[0] = smooth_bicycle_track(seed)
     speed_ahead = 10.0 + rng.uniform(0, 2)
     x[1], y[1], vx[1] = 30.0 + speed_ahead * steps, 3.5, speed_ahead  # constant speed, other lane

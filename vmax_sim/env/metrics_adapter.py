@@ -17,7 +17,15 @@ from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.environment import Environment
 from vmax_sim.env.termination import TerminationFn, combine_termination_fns
 from vmax_sim.map_index import lane_candidates, nearest_lane, route_reference_arcs
-from vmax_sim.metrics import MetricsConfig, StepInputs, offroad, overlaps, red_light_violation, sdc_box_at, select_candidates
+from vmax_sim.metrics import (
+    MetricsConfig,
+    StepInputs,
+    offroad,
+    overlaps,
+    red_light_violation,
+    sdc_box_at,
+    select_candidates,
+)
 from vmax_sim.observation import ObservationInputs
 
 METRIC_HISTORY = 3  # steps of SDC history the per-step metrics need (finite differences)

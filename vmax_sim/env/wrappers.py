@@ -109,7 +109,10 @@ class AutoResetEnvironment:
             # The k-th finished episode takes the k-th next scenario of the pool.
             indices = (carry.next_scenario + jnp.cumsum(done) - 1) % pool_size
             fresh = self.batched.reset(jax.tree.map(lambda a: a[indices], carry.pool))
-            mask = lambda a: done.reshape(done.shape + (1,) * (a.ndim - 1))
+
+            def mask(a):
+                return done.reshape(done.shape + (1,) * (a.ndim - 1))
+
             return jax.tree.map(lambda f, s: jnp.where(mask(s), f, s), fresh, stepped)
 
         state = jax.lax.cond(jnp.any(done), restart, lambda _: stepped, None)

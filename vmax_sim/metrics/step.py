@@ -188,7 +188,8 @@ def step_metrics(map_index: MapIndex, inputs: StepInputs, config: MetricsConfig 
     # driving direction judges against the nearest lane regardless of heading
     plain_k = jnp.argmin(lanes.distance)
     lane_progress = jnp.where(lanes.distance[plain_k] < config.lane_match_distance,
-                              (inputs.sdc_xy[-1] - inputs.sdc_xy[-2]) @ jnp.stack([lanes.dir_x[plain_k], lanes.dir_y[plain_k]]), 0.0)
+                              (inputs.sdc_xy[-1] - inputs.sdc_xy[-2])
+                              @ jnp.stack([lanes.dir_x[plain_k], lanes.dir_y[plain_k]]), 0.0)
     multiple = on_multiple_lanes(lanes, xy, yaw, size[1], config.lane_half_width, config.lane_max_angle_deg)
 
     fault = at_fault_collisions(sdc_box, motion["speed"], boxes, jnp.linalg.norm(vels, axis=-1), colliding,
@@ -211,7 +212,8 @@ def step_metrics(map_index: MapIndex, inputs: StepInputs, config: MetricsConfig 
     heading_before = jnp.stack([jnp.cos(inputs.sdc_yaw[-2]), jnp.sin(inputs.sdc_yaw[-2])])
     heading_now = jnp.stack([jnp.cos(yaw), jnp.sin(yaw)])
     red = red_light_violation(inputs.sdc_xy[-2] + 0.5 * size[0] * heading_before, xy + 0.5 * size[0] * heading_now,
-                              lane_id, jnp.stack([lanes.dir_x[lane_k], lanes.dir_y[lane_k]]), inputs.light_xy, inputs.light_lane_id,
+                              lane_id, jnp.stack([lanes.dir_x[lane_k], lanes.dir_y[lane_k]]), inputs.light_xy,
+                              inputs.light_lane_id,
                               inputs.light_state, inputs.light_valid, config.red_light_states,
                               config.red_light_lateral)
     infeasible = (jnp.abs(motion["accel"]) > config.max_accel) | (jnp.abs(motion["curvature"]) > config.max_curvature)

@@ -205,7 +205,8 @@ def apply_noise(key: jax.Array, inputs: ObservationInputs, indices: jnp.ndarray,
         valid_now = inputs.object_valid[indices, -1] & index_valid
         # sight line to each object as a zero-width box, tested against every nearer object
         mid, delta = 0.5 * (origin + now), now - origin
-        sight = jnp.concatenate([mid, jnp.linalg.norm(delta, axis=-1, keepdims=True), jnp.full_like(dist[:, None], 1e-3),
+        sight = jnp.concatenate([mid, jnp.linalg.norm(delta, axis=-1, keepdims=True),
+                                 jnp.full_like(dist[:, None], 1e-3),
                                  jnp.arctan2(delta[:, 1], delta[:, 0])[:, None]], -1)
         blocks = boxes_overlap(sight[:, None], boxes[None]) & valid_now[None] & (dist[None] < dist[:, None])
         visible = visible & ~jnp.any(blocks, axis=1)

@@ -166,7 +166,8 @@ def read_log_slice(conn: sqlite3.Connection, path: str, start_micros: int, end_m
     """Boxes, light states and ego poses of the sweeps with timestamps in [start, end]."""
     span = (int(start_micros), int(end_micros))
     boxes = fetch_all(conn, path, "SELECT b.lidar_pc_token, b.track_token, b.x, b.y, b.z, b.length, b.width, "
-                      "b.height, b.yaw, b.vx, b.vy FROM lidar_box AS b JOIN lidar_pc AS p ON p.token = b.lidar_pc_token "
+                      "b.height, b.yaw, b.vx, b.vy FROM lidar_box AS b "
+                      "JOIN lidar_pc AS p ON p.token = b.lidar_pc_token "
                       "WHERE p.timestamp BETWEEN ? AND ?", span)
     lights = fetch_all(conn, path, "SELECT s.lidar_pc_token, s.lane_connector_id, s.status FROM traffic_light_status "
                        "AS s JOIN lidar_pc AS p ON p.token = s.lidar_pc_token WHERE p.timestamp BETWEEN ? AND ?", span)

@@ -131,11 +131,12 @@ def lane_graph_distance(scenario: Scenario, obj: int) -> np.ndarray:
     lane_mask = np.isin(scenario.roadgraph_id, scenario.lane_id[scenario.lane_valid]) & scenario.roadgraph_valid
     positions = np.stack([scenario.x[obj], scenario.y[obj]], -1)[scenario.valid[obj]].astype(np.float64)
     starts, ends = polyline_segments(scenario.roadgraph_xyz, scenario.roadgraph_id, lane_mask)
-    seg_ids = scenario.roadgraph_id[lane_mask][:-1][scenario.roadgraph_id[lane_mask][1:] == scenario.roadgraph_id[lane_mask][:-1]]
+    seg_ids = scenario.roadgraph_id[lane_mask][:-1][
+        scenario.roadgraph_id[lane_mask][1:] == scenario.roadgraph_id[lane_mask][:-1]]
     _, index = _nearest_segment(positions[:1], starts, ends)
     first_lane = int(seg_ids[index[0]])
-    successors = {int(l): [int(s) for s in row if s >= 0]
-                  for l, row in zip(scenario.lane_id, scenario.lane_successors)}
+    successors = {int(lane): [int(s) for s in row if s >= 0]
+                  for lane, row in zip(scenario.lane_id, scenario.lane_successors)}
     reachable, todo = {first_lane}, [first_lane]
     while todo:
         for nxt in successors.get(todo.pop(), []):

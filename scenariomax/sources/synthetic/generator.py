@@ -89,15 +89,16 @@ def _assemble(sid: str, network: RoadNetwork, traffic: Traffic, sdc: int, sizes:
 
     height = per_step(traffic.height)
     lanes = network.lanes
-    links = [LaneLinks(l.lane_id, l.successors, l.predecessors, l.left_neighbors, l.right_neighbors) for l in lanes]
+    links = [LaneLinks(lane.lane_id, lane.successors, lane.predecessors, lane.left_neighbors, lane.right_neighbors)
+             for lane in lanes]
     lights = network.lights
     if lights:
         light_states = signal_states(network.signal_plan, np.arange(steps) * DT_S)
-        tl_state = np.stack([light_states[l.signal_group] for l in lights])
-        stop_points = np.array([l.xy[-1] for l in lights])
+        tl_state = np.stack([light_states[light.signal_group] for light in lights])
+        stop_points = np.array([light.xy[-1] for light in lights])
         light_fields = {
             "tl_state": tl_state, "tl_valid": np.ones_like(tl_state, bool),
-            "tl_lane_id": np.repeat(np.array([l.lane_id for l in lights])[:, None], steps, 1),
+            "tl_lane_id": np.repeat(np.array([light.lane_id for light in lights])[:, None], steps, 1),
             "tl_x": np.repeat(stop_points[:, :1], steps, 1), "tl_y": np.repeat(stop_points[:, 1:], steps, 1),
             "tl_z": np.zeros_like(tl_state, np.float32)}
     else:

@@ -79,10 +79,10 @@ class RoadNetwork:
     @property
     def lights(self) -> tuple[Lane, ...]:
         """Lanes ending at a traffic light, in light-index order."""
-        return tuple(sorted((l for l in self.lanes if l.light_index >= 0), key=lambda l: l.light_index))
+        return tuple(sorted((lane for lane in self.lanes if lane.light_index >= 0), key=lambda lane: lane.light_index))
 
     def map_polylines(self) -> list[MapPolyline]:
-        lanes = [MapPolyline(l.lane_id, l.lane_type, _xyz(l.xy), l.speed_limit) for l in self.lanes]
+        lanes = [MapPolyline(lane.lane_id, lane.lane_type, _xyz(lane.xy), lane.speed_limit) for lane in self.lanes]
         walks = [MapPolyline(c.feature_id, RG_CROSSWALK, _xyz(c.polygon), closed=True) for c in self.crosswalks]
         return lanes + list(self.lines) + list(self.edges) + walks + list(self.stop_signs)
 

@@ -124,7 +124,7 @@ def _junction(rng: np.random.Generator, topology: str, arm_angles: list[float], 
     corner = max(num_lanes) * width + 2.5
     stop_at = corner + 1.0 + CROSSWALK_WIDTH_M + 1.0
     arms = []
-    for k, (angle, num) in enumerate(zip(arm_angles, num_lanes)):
+    for _k, (angle, num) in enumerate(zip(arm_angles, num_lanes)):
         u, normal = geo.unit(angle), geo.left_normal(geo.unit(angle))
         length = float(rng.uniform(110.0, 150.0))
         ref = geo.segment(u * stop_at, u * (stop_at + length))

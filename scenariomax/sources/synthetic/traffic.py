@@ -164,9 +164,11 @@ class _World:
         self.kind[slot] = body.object_type
         desired = anticipate(np.minimum(shape.speed_limit * driver.speed_factor, shape.bend_speed))
         self.v_desired[slot, :n], self.v_desired[slot, n:] = desired, desired[-1]
-        self.a_max[slot], self.b_comf[slot], self.headway[slot] = driver.max_accel, driver.comfort_decel, driver.time_headway
+        self.a_max[slot], self.b_comf[slot], self.headway[slot] = (driver.max_accel, driver.comfort_decel,
+                                                                   driver.time_headway)
         self.active[slot] = True
-        zones = [(index, float(hits[0]), float(hits[-1])) for index, along, across, half_len, half_wid in shape.crosswalks
+        zones = [(index, float(hits[0]), float(hits[-1]))
+                 for index, along, across, half_len, half_wid in shape.crosswalks
                  if len(hits := np.flatnonzero((along < half_len + 1.0) & (across < half_wid + body.length / 2 + 0.8))
                         * ROUTE_DS_M)]
         self.plans[slot] = _Plan(route, list(shape.gates), zones)
@@ -274,7 +276,8 @@ class _World:
                     plan.entered.append((gate.lane_id, step - WARMUP_STEPS))
                     plan.next_gate += 1
                     plan.committed, plan.has_stopped = False, False
-                    self.gate_s[slot] = plan.gates[plan.next_gate].start_s if plan.next_gate < len(plan.gates) else np.inf
+                    self.gate_s[slot] = (plan.gates[plan.next_gate].start_s if plan.next_gate < len(plan.gates)
+                                         else np.inf)
                     continue
                 # Only reachable if something pushed the vehicle over: take the gate as entered.
                 plan.committed = True
@@ -296,7 +299,7 @@ class _World:
                 else:
                     limit = gate.start_s - half
             break
-        for crosswalk, first, last in plan.zones:
+        for crosswalk, first, _last in plan.zones:
             if self.blocked[crosswalk] and s < first < s + 80.0:
                 limit = min(limit, first)
         return limit
@@ -356,14 +359,15 @@ class _World:
 
     def idm(self, slots, speed, gap, lead_speed):
         a, b, headway = self.a_max[slots], self.b_comf[slots], self.headway[slots]
-        desired = STANDSTILL_GAP_M + np.maximum(0.0, speed * headway + speed * (speed - lead_speed) / (2 * np.sqrt(a * b)))
+        desired = STANDSTILL_GAP_M + np.maximum(
+            0.0, speed * headway + speed * (speed - lead_speed) / (2 * np.sqrt(a * b)))
         here = np.minimum((self.s[slots] / ROUTE_DS_M).astype(np.int64), self.last_index[slots])
         free = (speed / self.v_desired[slots, here]) ** 4
         interaction = np.where(np.isfinite(gap), (desired / np.maximum(gap, 0.1)) ** 2, 0.0)
         return a * (1.0 - free - interaction)
 
     def update_walkers(self, step: int, slots: np.ndarray) -> None:
-        for index, walk in enumerate(self.net.crosswalks):
+        for index, _walk in enumerate(self.net.crosswalks):
             self.blocked[index] = any(w.state == "crossing" and w.crosswalk == index for w in self.walkers)
         for walker in self.walkers:
             if walker.state == "waiting" and step >= walker.ready_step:

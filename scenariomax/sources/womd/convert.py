@@ -30,9 +30,11 @@ LANE_TYPES = {proto.LANE_TYPE_UNDEFINED: sch.RG_LANE_SURFACE_STREET, proto.LANE_
 # WOMD RoadLine.type 1..8 -> roadgraph types 6..13 (same order); unknown (0) stays unknown (0).
 ROAD_LINE_TYPES = {0: 0, **{k: k + 5 for k in range(1, 9)}}
 # WOMD RoadEdge.type -> roadgraph type; an unknown edge is treated as a boundary.
-ROAD_EDGE_TYPES = {proto.ROAD_EDGE_UNKNOWN: sch.RG_ROAD_EDGE_BOUNDARY, proto.ROAD_EDGE_BOUNDARY: sch.RG_ROAD_EDGE_BOUNDARY,
+ROAD_EDGE_TYPES = {proto.ROAD_EDGE_UNKNOWN: sch.RG_ROAD_EDGE_BOUNDARY,
+                   proto.ROAD_EDGE_BOUNDARY: sch.RG_ROAD_EDGE_BOUNDARY,
                    proto.ROAD_EDGE_MEDIAN: sch.RG_ROAD_EDGE_MEDIAN}
-KNOWN_OBJECT_TYPES = (sch.OBJECT_TYPE_VEHICLE, sch.OBJECT_TYPE_PEDESTRIAN, sch.OBJECT_TYPE_CYCLIST, sch.OBJECT_TYPE_OTHER)
+KNOWN_OBJECT_TYPES = (sch.OBJECT_TYPE_VEHICLE, sch.OBJECT_TYPE_PEDESTRIAN, sch.OBJECT_TYPE_CYCLIST,
+                      sch.OBJECT_TYPE_OTHER)
 _STATE_FIELDS = ("center_x", "center_y", "center_z", "length", "width", "height", "heading", "velocity_x", "velocity_y")
 
 
@@ -97,7 +99,8 @@ def map_polylines(message) -> tuple[list[MapPolyline], list[LaneLinks]]:
         elif kind == "stop_sign":
             polylines.append(MapPolyline(fid, sch.RG_STOP_SIGN, _points([feature.stop_sign.position])))
         elif kind in ("crosswalk", "speed_bump", "driveway"):
-            rg_type = {"crosswalk": sch.RG_CROSSWALK, "speed_bump": sch.RG_SPEED_BUMP, "driveway": sch.RG_DRIVEWAY}[kind]
+            rg_type = {"crosswalk": sch.RG_CROSSWALK, "speed_bump": sch.RG_SPEED_BUMP,
+                       "driveway": sch.RG_DRIVEWAY}[kind]
             polylines.append(MapPolyline(fid, rg_type, _points(getattr(feature, kind).polygon), closed=True))
     polylines = [p for p in polylines if len(p.xyz)]
     return orient_road_edges(polylines, sch.ROAD_EDGE_TYPES, sch.LANE_TYPES), links
@@ -171,7 +174,8 @@ def _window(tracks: dict, start: int, num_timesteps: int, seconds: np.ndarray) -
     )
 
 
-def scenario_windows(message, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE) -> Iterator[Scenario | ScenarioBuildError]:
+def scenario_windows(message, sizes: Sizes,
+                     stride: int = DEFAULT_WINDOW_STRIDE) -> Iterator[Scenario | ScenarioBuildError]:
     """Every 91-step window of one WOMD Scenario message, fitted to the budget. Windows that cannot be
     built are yielded as ScenarioBuildError (the caller records them as Failures)."""
     scenario_id = message.scenario_id or "unnamed"

@@ -161,9 +161,11 @@ def map_features() -> dict:
     """layer -> (geometry type, [(column, sql type)], [row dicts with 'geom' in UTM])."""
     line = shapely.LineString
     lanes = [
-        {"fid": 101, "lane_fid": 101, "lane_group_fid": 10, "lane_index": 0, "left_boundary_fid": 401, "right_boundary_fid": 402,
+        {"fid": 101, "lane_fid": 101, "lane_group_fid": 10, "lane_index": 0, "left_boundary_fid": 401,
+             "right_boundary_fid": 402,
              "speed_limit_mps": 13.4, "lane_type_fid": 0, "geom": _rect(E0 - 200, N0 + 1.75, E0 + 100, N0 + 5.25)},
-        {"fid": 102, "lane_fid": 102, "lane_group_fid": 10, "lane_index": 1, "left_boundary_fid": 402, "right_boundary_fid": 403,
+        {"fid": 102, "lane_fid": 102, "lane_group_fid": 10, "lane_index": 1, "left_boundary_fid": 402,
+             "right_boundary_fid": 403,
              "speed_limit_mps": 13.4, "lane_type_fid": 0, "geom": _rect(E0 - 200, N0 - 1.75, E0 + 100, N0 + 1.75)},
         {"fid": 103, "lane_fid": 103, "lane_group_fid": 11, "lane_index": 0, "left_boundary_fid": None,
              "right_boundary_fid": None, "speed_limit_mps": None, "lane_type_fid": 0,
@@ -177,12 +179,12 @@ def map_features() -> dict:
              "lane_group_connector_fid": 20, "intersection_fid": 30, "traffic_light_stop_line_fids": "",
              "speed_limit_mps": None, "geom": line([(E0 + 100, N0 + 3.5), (E0 + 120, N0)])},
     ]
-    baselines = [{"fid": 300 + k, "lane_fid": lane, "lane_connector_fid": None, "path_type_fid": 0, "dubins_node_fids": "",
-                      "geom": line([(x0, LANE_Y[lane]), (x1, LANE_Y[lane])])}
+    baselines = [{"fid": 300 + k, "lane_fid": lane, "lane_connector_fid": None, "path_type_fid": 0,
+                      "dubins_node_fids": "", "geom": line([(x0, LANE_Y[lane]), (x1, LANE_Y[lane])])}
                  for k, (lane, x0, x1) in enumerate([(101, E0 - 200, E0 + 100), (102, E0 - 200, E0 + 100),
                                                      (103, E0 + 120, E0 + 400)], start=1)]
-    baselines += [{"fid": 304 + k, "lane_fid": None, "lane_connector_fid": c["fid"], "path_type_fid": 0, "dubins_node_fids": "",
-                       "geom": c["geom"]} for k, c in enumerate(connectors)]
+    baselines += [{"fid": 304 + k, "lane_fid": None, "lane_connector_fid": c["fid"], "path_type_fid": 0,
+                       "dubins_node_fids": "", "geom": c["geom"]} for k, c in enumerate(connectors)]
     boundaries = [{"fid": 401, "boundary_type_fid": 2, "geom": line([(E0 - 200, N0 + 5.25), (E0 + 100, N0 + 5.25)])},
                   {"fid": 402, "boundary_type_fid": 0, "geom": line([(E0 - 200, N0 + 1.75), (E0 + 100, N0 + 1.75)])},
                   {"fid": 403, "boundary_type_fid": 2, "geom": line([(E0 + 100, N0 - 1.75), (E0 - 200, N0 - 1.75)])}]
@@ -193,22 +195,23 @@ def map_features() -> dict:
     intersections = [{"fid": 30, "intersection_type_fid": 1, "is_mini": 0,
                           "geom": _rect(E0 + 100, N0 - 1.75, E0 + 120, N0 + 5.25)}]
     generic = [{"fid": 801, "geom": _rect(E0 + 120, N0 - 1.75, E0 + 400, N0 + 1.75)}]
-    I, R, T = "INTEGER", "REAL", "TEXT(256)"
+    INT, R, T = "INTEGER", "REAL", "TEXT(256)"
     return {
-        "lanes_polygons": ("POLYGON", [("lane_fid", I), ("lane_group_fid", I), ("lane_index", "MEDIUMINT"),
-                                       ("left_boundary_fid", I), ("right_boundary_fid", I), ("speed_limit_mps", R),
-                                       ("lane_type_fid", I)], lanes),
-        "lane_connectors": ("LINESTRING", [("exit_lane_fid", I), ("entry_lane_fid", I), ("exit_lane_group_fid", I),
-                                           ("entry_lane_group_fid", I), ("lane_group_connector_fid", I),
-                                           ("intersection_fid", I), ("traffic_light_stop_line_fids", T),
+        "lanes_polygons": ("POLYGON", [("lane_fid", INT), ("lane_group_fid", INT), ("lane_index", "MEDIUMINT"),
+                                       ("left_boundary_fid", INT), ("right_boundary_fid", INT), ("speed_limit_mps", R),
+                                       ("lane_type_fid", INT)], lanes),
+        "lane_connectors": ("LINESTRING", [("exit_lane_fid", INT), ("entry_lane_fid", INT),
+                                           ("exit_lane_group_fid", INT), ("entry_lane_group_fid", INT),
+                                           ("lane_group_connector_fid", INT), ("intersection_fid", INT),
+                                           ("traffic_light_stop_line_fids", T),
                                            ("speed_limit_mps", R)], connectors),
-        "baseline_paths": ("LINESTRING", [("lane_fid", I), ("lane_connector_fid", I), ("path_type_fid", I),
+        "baseline_paths": ("LINESTRING", [("lane_fid", INT), ("lane_connector_fid", INT), ("path_type_fid", INT),
                                           ("dubins_node_fids", T)], baselines),
-        "boundaries": ("LINESTRING", [("boundary_type_fid", I)], boundaries),
+        "boundaries": ("LINESTRING", [("boundary_type_fid", INT)], boundaries),
         "crosswalks": ("POLYGON", [("is_marked", "BOOLEAN")], crosswalks),
-        "stop_polygons": ("POLYGON", [("stop_polygon_type_fid", I)], stops),
+        "stop_polygons": ("POLYGON", [("stop_polygon_type_fid", INT)], stops),
         "road_segments": ("POLYGON", [], road_segments),
-        "intersections": ("POLYGON", [("intersection_type_fid", I), ("is_mini", "BOOLEAN")], intersections),
+        "intersections": ("POLYGON", [("intersection_type_fid", INT), ("is_mini", "BOOLEAN")], intersections),
         "generic_drivable_areas": ("POLYGON", [], generic),
         "carpark_areas": ("POLYGON", [("heading", R)], []),
         "traffic_lights": ("POINT", [("ori_mean_yaw", R)],
@@ -234,8 +237,8 @@ def utm_to_lonlat(easting, northing, zone: int = UTM_ZONE):
     e = math.sqrt(f * (2 - f))
     lat = chi.copy()
     for _ in range(20):
-        lat = 2 * np.arctan(np.tan(math.pi / 4 + chi / 2) * ((1 + e * np.sin(lat)) / (1 - e * np.sin(lat))) ** (e / 2)) \
-            - math.pi / 2
+        lat = 2 * np.arctan(np.tan(math.pi / 4 + chi / 2)
+                            * ((1 + e * np.sin(lat)) / (1 - e * np.sin(lat))) ** (e / 2)) - math.pi / 2
     lon = math.radians(zone * 6 - 183) + np.arctan2(np.sinh(eta_p), np.cos(xi_p))
     return np.degrees(lon), np.degrees(lat)
 

@@ -31,7 +31,8 @@ def test_objects_types_ids_and_labels(converted):
     assert converted.scenario_id == "toy-sn" and converted.source_dataset == "scenarionet"
     assert converted.validate() == []
     assert converted.object_id.tolist() == [OBJECT_IDS["ego"], OBJECT_IDS["cone"], OBJECT_IDS["ped-a"]]
-    assert converted.object_type.tolist() == [sch.OBJECT_TYPE_VEHICLE, sch.OBJECT_TYPE_OTHER, sch.OBJECT_TYPE_PEDESTRIAN]
+    assert converted.object_type.tolist() == [sch.OBJECT_TYPE_VEHICLE, sch.OBJECT_TYPE_OTHER,
+                                              sch.OBJECT_TYPE_PEDESTRIAN]
     assert converted.tracks_to_predict.tolist() == [False, False, True]
     assert converted.difficulty_level.tolist() == [0, 0, 1]
     assert converted.objects_of_interest.tolist() == [False, False, True]
@@ -66,7 +67,8 @@ def test_map_ids_types_speed_limits_and_links(converted):
     edge = converted.roadgraph_xyz[converted.roadgraph_id == MAP_IDS["edge-1"]]
     assert edge[0, 0] == 0 and edge[-1, 0] == 150  # flipped: the lanes (y = 0) are now on its left
     assert converted.lane_id.tolist() == [MAP_IDS["lane-1"], MAP_IDS["lane-2"]]
-    assert converted.lane_successors[0, 0] == MAP_IDS["lane-2"] and converted.lane_predecessors[1, 0] == MAP_IDS["lane-1"]
+    assert converted.lane_successors[0, 0] == MAP_IDS["lane-2"]
+    assert converted.lane_predecessors[1, 0] == MAP_IDS["lane-1"]
 
 
 def test_traffic_light_resampled(converted):

@@ -60,7 +60,8 @@ def test_real_sample_matches_raw(sample):
         np.testing.assert_allclose(scenario.x[0], sdc["position"][window, 0], atol=1e-3, rtol=0)
         np.testing.assert_allclose(scenario.y[0], sdc["position"][window, 1], atol=1e-3, rtol=0)
         expected = collections.Counter(OUR_TYPES[f["type"]] for f in raw["map_features"].values())
-        got = collections.Counter(t for t, _ in set(zip(scenario.roadgraph_type.tolist(), scenario.roadgraph_id.tolist())))
+        got = collections.Counter(
+            t for t, _ in set(zip(scenario.roadgraph_type.tolist(), scenario.roadgraph_id.tolist())))
         assert got == expected and sum(got.values()) == len(raw["map_features"]) == 577
         types = collections.Counter(scenario.object_type.tolist())
         assert types == {1: 28, 4: 16, 2: 12, 3: 1}  # TRAFFIC_BARRIER -> other

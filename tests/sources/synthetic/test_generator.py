@@ -202,12 +202,13 @@ def test_parked_cars_stand_still_off_the_travel_lanes():
 def test_codec_round_trip_preserves_the_scenario(scenarios):
     s = scenarios[("intersection4", 0)]
     back = decode_scenario(encode_scenario(s, SIZES), SIZES)
-    n, r, l, k = s.num_objects, len(s.roadgraph_xyz), s.tl_state.shape[0], len(s.lane_id)
+    n, r, num_tl, k = s.num_objects, len(s.roadgraph_xyz), s.tl_state.shape[0], len(s.lane_id)
     assert back.scenario_id == s.scenario_id
     for name, count in (("x", n), ("y", n), ("bbox_yaw", n), ("velocity_x", n), ("valid", n), ("speed", n),
                         ("object_type", n), ("is_sdc", n), ("tracks_to_predict", n), ("roadgraph_xyz", r),
-                        ("roadgraph_type", r), ("roadgraph_id", r), ("tl_state", l), ("tl_lane_id", l),
-                        ("tl_x", l), ("lane_id", k), ("lane_successors", k), ("lane_left_neighbors", k)):
+                        ("roadgraph_type", r), ("roadgraph_id", r), ("tl_state", num_tl),
+                        ("tl_lane_id", num_tl), ("tl_x", num_tl), ("lane_id", k), ("lane_successors", k),
+                        ("lane_left_neighbors", k)):
         original = getattr(s, name)
         assert np.array_equal(getattr(back, name)[:count], original.astype(getattr(back, name).dtype)), name
     assert not back.valid[n:].any() and not back.roadgraph_valid[r:].any()

@@ -26,7 +26,8 @@ def test_signal_phases_follow_the_cycle():
 
 def test_box_overlap_hand_cases():
     a = box_corners(np.array([0.0]), np.array([0.0]), np.array([0.0]), np.array([4.0]), np.array([2.0]))
-    touching_corner = box_corners(np.array([3.9]), np.array([1.9]), np.array([np.pi / 4]), np.array([4.0]), np.array([2.0]))
+    touching_corner = box_corners(np.array([3.9]), np.array([1.9]), np.array([np.pi / 4]), np.array([4.0]),
+                                  np.array([2.0]))
     beside = box_corners(np.array([0.0]), np.array([2.2]), np.array([0.0]), np.array([4.0]), np.array([2.0]))
     behind = box_corners(np.array([-4.5]), np.array([0.0]), np.array([0.3]), np.array([4.0]), np.array([2.0]))
     crossing = box_corners(np.array([1.0]), np.array([1.0]), np.array([np.pi / 2]), np.array([4.0]), np.array([2.0]))

@@ -95,8 +95,9 @@ def test_real_traffic_lights_match_raw(converted, scenario_path):
     step = 10
     raw = {int(s.lane): int(s.state) for s in message.dynamic_map_states[step].lane_states}
     assert raw, "the sample has traffic-light states"
-    got = {int(lane): int(state) for lane, state, ok in zip(converted.tl_lane_id[:, step],
-                                                              converted.tl_state[:, step], converted.tl_valid[:, step]) if ok}
+    got = {int(lane): int(state)
+           for lane, state, ok in zip(converted.tl_lane_id[:, step], converted.tl_state[:, step],
+                                      converted.tl_valid[:, step]) if ok}
     assert got == raw
     lane_ids = set(converted.lane_id.tolist())
     assert set(raw) <= lane_ids  # lights point at lanes of the lane graph
@@ -116,7 +117,8 @@ def test_real_road_edges_have_the_road_on_their_left(converted, scenario_path):
     raw_first = {f.id: (f.road_edge.polyline[0].x, f.road_edge.polyline[0].y)
                  for f in raw_message(scenario_path).map_features if f.WhichOneof("feature_data") == "road_edge"}
     flipped = [fid for fid in edge_ids
-               if not np.allclose(converted.roadgraph_xyz[converted.roadgraph_id == fid][0, :2], raw_first[fid], atol=1e-3)]
+               if not np.allclose(converted.roadgraph_xyz[converted.roadgraph_id == fid][0, :2], raw_first[fid],
+                                  atol=1e-3)]
     assert flipped == []  # this sample already draws every edge with the road on its left: nothing to flip
 
 
