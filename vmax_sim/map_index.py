@@ -204,20 +204,27 @@ def _edge_distance_field(start, end, origin, edge_table, config):
     cells = np.argwhere(~window_has_edge)
     if len(cells) == 0:
         return field
-    pts = (origin + (cells + 0.5) * cs).astype(np.float32)[:, None]
-    s, seg = start.astype(np.float32)[None], (end - start).astype(np.float32)[None]
-    inv = 1.0 / np.maximum(np.sum(seg * seg, -1), 1e-12)
-    best_dist = np.full(len(pts), np.inf, np.float32)
-    best_side = np.zeros(len(pts), np.float32)
-    for lo in range(0, len(pts), 256):  # chunks bound the host memory
-        rel = pts[lo:lo + 256] - s
-        t = np.clip(np.sum(rel * seg, -1) * inv, 0, 1)
-        dist = np.sum((rel - t[..., None] * seg) ** 2, -1)
-        arg = np.argmin(dist, axis=1)
-        rows = np.arange(len(arg))
-        best_dist[lo:lo + 256] = np.sqrt(dist[rows, arg])
-        best_side[lo:lo + 256] = seg[0, arg, 0] * rel[rows, arg, 1] - seg[0, arg, 1] * rel[rows, arg, 0]
-    field[cells[:, 0], cells[:, 1]] = np.where(best_side < 0, best_dist, -best_dist)
+    pts = origin + (cells + 0.5) * cs  # (C, 2) cell centres
+    # Nearest segment via a KD-tree over points every <= 1 m along each segment, then the exact
+    # distance and side to that segment: these cells are >= a window away from any edge, so a
+    # nearly-nearest segment changes the distance by < 0.5 m (brute force over all segments cost
+    # ~45 ms per scenario, this ~3 ms).
+    from scipy.spatial import cKDTree
+
+    seg = (end - start).astype(np.float64)
+    length = np.linalg.norm(seg, axis=1)
+    per_segment = np.maximum(np.ceil(length).astype(np.int64), 1) + 1
+    owner = np.repeat(np.arange(len(start)), per_segment)
+    first = np.cumsum(per_segment) - per_segment
+    frac = (np.arange(len(owner)) - np.repeat(first, per_segment)) / np.repeat(per_segment - 1, per_segment)
+    samples = start[owner] + frac[:, None] * seg[owner]
+    _, nearest = cKDTree(samples).query(pts)
+    k = owner[nearest]
+    rel = pts - start[k]
+    t = np.clip(np.sum(rel * seg[k], -1) / np.maximum(length[k] ** 2, 1e-12), 0.0, 1.0)
+    dist = np.linalg.norm(rel - t[:, None] * seg[k], axis=1)
+    side = seg[k, 0] * rel[:, 1] - seg[k, 1] * rel[:, 0]
+    field[cells[:, 0], cells[:, 1]] = np.where(side < 0, dist, -dist).astype(np.float32)
     return field
 
 

@@ -34,6 +34,20 @@ def test_expert_on_the_real_womd_scenario_stays_on_the_road(tmp_path):
     assert summary["metrics"]["log_divergence"] < 0.1
 
 
+def test_expert_on_the_real_av2_scenario_stays_on_the_road(tmp_path):
+    # AV2 splits the drivable area into touching polygons; a car crossing their seam must not be off-road.
+    raw = REALDATA / "av2"
+    if not raw.exists():
+        pytest.skip(f"real AV2 sample not found at {raw} (the shared folder is absent)")
+    from scenariomax.sources.av2 import Av2Source
+
+    shards = _convert(Av2Source(str(raw), sizes=Sizes()), tmp_path / "av2", Sizes())
+    summary = evaluate("expert", DataConfig(path=str(shards), batch_size=1)).summary
+    assert summary["metrics"]["offroad"] == 0.0
+    assert summary["accuracy"] == 1.0
+    assert summary["metrics"]["ego_progress"] > 0.95
+
+
 @pytest.mark.slow
 def test_expert_replay_bar_on_200_synthetic_scenarios(tmp_path):
     from scenariomax.sources.synthetic import SyntheticSource

@@ -151,6 +151,46 @@ def counter_clockwise_ring(xyz: np.ndarray) -> np.ndarray:
     return xyz[::-1].copy() if signed_area(xyz[:, :2]) < 0 else xyz
 
 
+def drivable_area_edges(areas: list[tuple[int, np.ndarray]]) -> list[MapPolyline]:
+    """Road edges = the outline of the UNION of the drivable areas: exteriors counter-clockwise
+    (boundary type), holes clockwise (median type), so the drivable area is always on the left.
+
+    AV2 splits the drivable area into polygons that touch; their shared seams are not road edges
+    (a car crossing a seam would look off-road to the nearest-edge rule). Each union polygon keeps
+    the smallest id of the areas it contains; holes get stable derived ids. z comes from the
+    nearest input boundary vertex.
+    """
+    import zlib
+
+    import shapely
+
+    if not areas:
+        return []
+    polygons = [shapely.Polygon(boundary[:, :2]).buffer(0) for _, boundary in areas]
+    # A 2 cm close-open merges seams that are not exactly shared (AV2 quantises to 1 cm).
+    union = shapely.union_all(polygons).buffer(0.02, join_style="mitre").buffer(-0.02, join_style="mitre")
+    vertices = np.concatenate([boundary for _, boundary in areas])
+
+    def with_z(xy: np.ndarray) -> np.ndarray:
+        nearest = np.argmin(((xy[:, None, :] - vertices[None, :, :2]) ** 2).sum(-1), axis=1)
+        return np.column_stack([xy, vertices[nearest, 2]])
+
+    edges = []
+    for polygon in sorted(shapely.get_parts(union), key=lambda poly: poly.bounds):
+        if polygon.is_empty or polygon.area < 1.0:
+            continue
+        polygon = shapely.orient_polygons(polygon) if hasattr(shapely, "orient_polygons") else \
+            shapely.geometry.polygon.orient(polygon, 1.0)
+        poly_id = min(area_id for (area_id, _), part in zip(areas, polygons) if part.intersects(polygon))
+        exterior = np.asarray(polygon.exterior.coords)[:-1]
+        edges.append(MapPolyline(poly_id, sch.RG_ROAD_EDGE_BOUNDARY, with_z(exterior), closed=True))
+        for index, hole in enumerate(polygon.interiors):
+            hole_id = zlib.crc32(f"av2-hole-{poly_id}-{index}".encode()) & 0x7FFFFFFF
+            edges.append(MapPolyline(hole_id, sch.RG_ROAD_EDGE_MEDIAN, with_z(np.asarray(hole.coords)[:-1]),
+                                     closed=True))
+    return edges
+
+
 def _geometry_key(xyz: np.ndarray) -> bytes:
     """Direction-independent key of a polyline at 1 cm (AV2's quantisation), to find shared boundaries."""
     cm = np.round(xyz[:, :2] * 100.0).astype(np.int64)
@@ -239,14 +279,14 @@ def parse_map(archive: Any, lane_speed_limit: float = -1.0) -> Av2Map:
                                       np.vstack([edge1, edge2[::-1]]), closed=True))
         ground += [edge1, edge2]
 
-    road_edges = []
+    areas = []
     for key, record in sorted(area_records.items(), key=lambda kv: str(kv[0])):
         where = f"drivable_areas[{key}]"
         feature_id = _as_id(_field(record, "id", where), where)
         boundary = parse_points(_field(record, "area_boundary", where), f"{where}.area_boundary", min_points=3)
-        road_edges.append(MapPolyline(_unique_id(feature_id, lane_ids), sch.RG_ROAD_EDGE_BOUNDARY,
-                                      counter_clockwise_ring(boundary), closed=True))
+        areas.append((_unique_id(feature_id, lane_ids), boundary))
         ground.append(boundary)
+    road_edges = drivable_area_edges(areas)
 
     crosswalks.sort(key=lambda line: line.feature_id)
     road_edges.sort(key=lambda line: line.feature_id)
