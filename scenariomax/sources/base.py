@@ -9,7 +9,10 @@ the same records.
 from __future__ import annotations
 
 import dataclasses
+import fnmatch
+import glob
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Protocol, Union
 
 
@@ -43,3 +46,21 @@ class Source(Protocol):
 
     def settings(self) -> dict:
         """Source settings recorded in the manifest (and compared on --resume)."""
+
+
+def expand_inputs(src: str, pattern: str, description: str) -> list[str]:
+    """Sorted input files named by `src`: a file, a directory searched recursively for `pattern`, or a
+    glob (its matching files whose names fit `pattern`). Raises InputError naming `src` when none."""
+    path = Path(src)
+    if path.is_file():
+        return [str(path)]
+    if path.is_dir():
+        files = sorted(str(p) for p in path.rglob(pattern) if p.is_file())
+        if not files:
+            raise InputError(f"{src}: no {description} ({pattern}) found in this directory")
+        return files
+    files = sorted(p for p in glob.glob(src, recursive=True)
+                   if Path(p).is_file() and fnmatch.fnmatch(Path(p).name, pattern))
+    if not files:
+        raise InputError(f"{src}: no {description} ({pattern}) found (no such file, directory or glob match)")
+    return files

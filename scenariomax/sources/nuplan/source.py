@@ -3,16 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
-import glob
 import sqlite3
 from collections.abc import Iterator
-from pathlib import Path
 from typing import ClassVar
 
 import shapely
 
 from scenariomax.schema import Sizes, default_sizes
-from scenariomax.sources.base import Failure, InputError
+from scenariomax.sources.base import Failure, InputError, expand_inputs
 from scenariomax.sources.nuplan.convert import build_scenario, scenario_id, window_time_span
 from scenariomax.sources.nuplan.log_db import LogSlice, read_log_index, read_log_slice
 from scenariomax.sources.nuplan.map_reader import find_map_file, load_city_map
@@ -27,15 +25,7 @@ _DATA_ERRORS = (sqlite3.Error, ValueError, TypeError, KeyError, IndexError, Over
 
 def expand_db_paths(src: str) -> list[str]:
     """A .db file, a directory (searched recursively) or a glob -> sorted .db paths."""
-    path = Path(src)
-    if path.is_file():
-        return [str(path)]
-    if path.is_dir():
-        return sorted(str(p) for p in path.rglob(f"*{DB_SUFFIX}") if p.is_file())
-    matches = sorted(p for p in glob.glob(src, recursive=True) if p.endswith(DB_SUFFIX) and Path(p).is_file())
-    if not matches:
-        raise InputError(f"{src}: no nuPlan log databases (*.db) found")
-    return matches
+    return expand_inputs(src, f"*{DB_SUFFIX}", "nuPlan log databases")
 
 
 @dataclasses.dataclass(frozen=True)

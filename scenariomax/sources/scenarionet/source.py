@@ -8,10 +8,10 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 from scenariomax.schema import Sizes
-from scenariomax.sources.base import Failure, InputError, UnitItem
+from scenariomax.sources.base import Failure, InputError, UnitItem, expand_inputs
 from scenariomax.sources.scenarionet.convert import SOURCE_NAME, description_windows
 from scenariomax.sources.scenarionet.unpickle import load_pickle
-from scenariomax.sources.womd.source import expand_src, one_line
+from scenariomax.sources.womd.source import one_line
 from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE
 
 FILE_PATTERN = "sd_*.pkl"
@@ -43,12 +43,14 @@ class ScenarioNetSource:
     def list_units(self) -> list[str]:
         path = Path(self.src)
         if path.is_dir():
-            found = {str(Path(f).resolve()) for f in expand_src(self.src, FILE_PATTERN)}
+            listed = expand_inputs(self.src, FILE_PATTERN, "ScenarioNet scenario files")
+            found = {str(Path(f).resolve()) for f in listed}
             for mapping in [path / MAPPING_FILE, *path.rglob(f"*/{MAPPING_FILE}")]:
                 if mapping.is_file():
                     found.update(f for f in mapped_files(mapping.parent) if os.path.isfile(f))
             return sorted(found)
-        return [u for u in expand_src(self.src, "*.pkl") if Path(u).name not in (SUMMARY_FILE, MAPPING_FILE)]
+        pickles = expand_inputs(self.src, "*.pkl", "ScenarioNet pickles")
+        return [u for u in pickles if Path(u).name not in (SUMMARY_FILE, MAPPING_FILE)]
 
     def settings(self) -> dict:
         return {"window_stride": self.window_stride, "sizes": self.budget.as_dict()}

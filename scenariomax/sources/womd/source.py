@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
-import glob
 import os
 from collections.abc import Iterator
-from pathlib import Path
 
 from scenariomax.io.tfrecord import RecordError, iter_records
 from scenariomax.schema import Sizes
-from scenariomax.sources.base import Failure, InputError, UnitItem
+from scenariomax.sources.base import Failure, InputError, UnitItem, expand_inputs
 from scenariomax.sources.womd.convert import SOURCE_NAME, ScenarioBuildError, parse_scenario, scenario_windows
 from scenariomax.sources.womd.tfexample import (
     FORMAT_AUTO,
@@ -27,15 +25,7 @@ _FORMATS = (FORMAT_AUTO, FORMAT_SCENARIO, FORMAT_TF_EXAMPLE)
 
 def expand_src(src: str, pattern: str) -> list[str]:
     """Sorted input files from a file, a directory (searched recursively for `pattern`) or a glob."""
-    path = Path(src)
-    if path.is_file():
-        return [str(path)]
-    if path.is_dir():
-        return sorted(str(p) for p in path.rglob(pattern) if p.is_file())
-    matches = sorted(p for p in glob.glob(src, recursive=True) if os.path.isfile(p))
-    if not matches:
-        raise InputError(f"{src}: no such file, directory or glob match")
-    return matches
+    return expand_inputs(src, pattern, "WOMD record files")
 
 
 def one_line(error: BaseException) -> str:
