@@ -13,19 +13,7 @@ import sys
 import numpy as np
 
 from scenariomax import read_shards
-
-
-def point_to_polyline_distance(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
-    """Distance from each point (k, 2) to a polyline (m, 2). -> (k,)"""
-    if len(polyline) == 1:
-        return np.linalg.norm(points - polyline[0], axis=1)
-    start, end = polyline[:-1], polyline[1:]
-    seg = end - start
-    seg_len2 = np.maximum((seg ** 2).sum(-1), 1e-12)
-    rel = points[:, None, :] - start[None]
-    t = np.clip((rel * seg[None]).sum(-1) / seg_len2[None], 0.0, 1.0)
-    nearest = start[None] + t[..., None] * seg[None]
-    return np.linalg.norm(points[:, None, :] - nearest, axis=-1).min(axis=1)
+from scenariomax.enrich.geometry import project_to_polyline
 
 
 def scenario_path_distances(scenario) -> np.ndarray | None:
@@ -38,7 +26,7 @@ def scenario_path_distances(scenario) -> np.ndarray | None:
         line = scenario.path_xyz[p][scenario.path_valid[p]][:, :2].astype(np.float64)
         if len(line) == 0:
             continue
-        dist = point_to_polyline_distance(points, line)
+        dist = project_to_polyline(points, line)[0]
         best = dist if best is None else np.minimum(best, dist)
     return best
 

@@ -5,6 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 
+def wrap_angle(angle) -> np.ndarray:
+    """Radians wrapped to [-pi, pi). Any shape; keeps float32 input float32."""
+    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
+
+
 def polyline_runs(ids: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """(start, stop) index pairs of the consecutive runs of equal id among valid points. -> (k, 2)"""
     ids = np.asarray(ids)

@@ -17,16 +17,12 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.datatypes.trajectory import STEP_MICROS, Trajectory, select_timestep
+from vmax_sim.geometry.transforms import wrap_angle  # noqa: F401 (shared; re-exported)
 
 DT = 0.1  # seconds per step
 ACCEL_BOUNDS = (-6.0, 6.0)  # m/s^2, used to normalise actions to [-1, 1]
 CURVATURE_BOUNDS = (-0.3, 0.3)  # 1/m (a turning radius of 3.3 m)
 _MIN_DISTANCE = 1e-3  # metres; below this the heading change says nothing about curvature
-
-
-def wrap_angle(angle: jax.Array) -> jax.Array:
-    """Angle wrapped to [-pi, pi). Any shape."""
-    return (angle + jnp.pi) % (2 * jnp.pi) - jnp.pi
 
 
 def heading_speed(trajectory: Trajectory) -> jax.Array:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from scenariomax.enrich.budget import fit_to_budget
+from scenariomax.enrich.geometry import wrap_angle  # noqa: F401 (shared; re-exported)
 from scenariomax.enrich.roadgraph import lane_graph_arrays, polylines_to_roadgraph
 from scenariomax.scenario import Scenario
 from scenariomax.schema import OBJECT_TYPE_OTHER, Sizes
@@ -48,11 +49,6 @@ def ground_heights(xy: np.ndarray, ground_xyz: np.ndarray) -> np.ndarray:
         block = queries[start:start + _CHUNK, None, :] - ground[None, :, :2]
         heights[start:start + _CHUNK] = ground[np.argmin(np.einsum("qgk,qgk->qg", block, block), axis=1), 2]
     return heights[query_of]
-
-
-def wrap_angle(angle: np.ndarray) -> np.ndarray:
-    """Radians -> [-pi, pi]."""
-    return np.arctan2(np.sin(angle), np.cos(angle))
 
 
 def build_scenario(tracks: RawTracks, av2_map: Av2Map, sizes: Sizes) -> Scenario:

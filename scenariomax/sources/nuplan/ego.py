@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from scenariomax.enrich.geometry import wrap_angle  # noqa: F401 (shared; re-exported)
+
 EGO_LENGTH_M = 5.176
 EGO_WIDTH_M = 2.297
 EGO_HEIGHT_M = 1.777
@@ -34,8 +36,3 @@ def center_velocity_global(vx_body: np.ndarray, vy_body: np.ndarray, yaw_rate: n
     vy_c = vy_body + yaw_rate * REAR_AXLE_TO_CENTER_M
     cos, sin = np.cos(yaw), np.sin(yaw)
     return cos * vx_c - sin * vy_c, sin * vx_c + cos * vy_c
-
-
-def wrap_angle(angle: np.ndarray) -> np.ndarray:
-    """Radians -> [-pi, pi]."""
-    return np.arctan2(np.sin(angle), np.cos(angle))

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from scenariomax.enrich.geometry import wrap_angle  # noqa: F401 (shared; re-exported)
+
 
 def unit(angle: float) -> np.ndarray:
     """Unit vector at `angle` radians. -> (2,)"""
@@ -72,8 +74,3 @@ def resample(xy: np.ndarray, spacing: float) -> np.ndarray:
 def rotation(angle: float) -> np.ndarray:
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, -s], [s, c]])
-
-
-def wrap_angle(angle):
-    """Angles wrapped to [-pi, pi)."""
-    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi

@@ -9,7 +9,7 @@ window; a 199-step `training_20s` file gives windows starting at 0 and 80 (curre
 
 from __future__ import annotations
 
-import numpy as np
+from scenariomax.enrich.geometry import wrap_angle  # noqa: F401 (shared; re-exported)
 
 DEFAULT_WINDOW_STRIDE = 80
 
@@ -21,8 +21,3 @@ def window_starts(num_steps: int, current_time_index: int, num_past: int = 10, n
     if first < 0 or stride <= 0:
         return []
     return list(range(first, num_steps - num_timesteps + 1, stride))
-
-
-def wrap_angle(angle: np.ndarray) -> np.ndarray:
-    """Angles wrapped to [-pi, pi)."""
-    return (np.asarray(angle, np.float64) + np.pi) % (2 * np.pi) - np.pi
