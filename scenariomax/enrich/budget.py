@@ -1,7 +1,10 @@
 """Fitting a scenario into the shard budget without losing what matters.
 
 Objects: the SDC goes to slot 0, the rest are ordered by relevance (closest approach to the SDC
-over the episode) and the least relevant are dropped. Roadgraph: when there are too many points,
+over the episode). When there are more objects than slots, the kept ones are chosen by priority:
+the SDC, then WOMD's `tracks_to_predict`, then `objects_of_interest`, then relevance; the kept ones
+stay in relevance order (so a scenario within budget is never reordered by its labels, and fitting
+twice changes nothing). Roadgraph: when there are too many points,
 keep those nearest the SDC trajectory (in their original order, so polylines stay contiguous).
 Lights and lanes: nearest the SDC trajectory first.
 """
@@ -62,14 +65,37 @@ def object_relevance_order(scenario: Scenario) -> np.ndarray:
     return np.argsort(closest, kind="stable")
 
 
+def objects_to_keep(scenario: Scenario, num_slots: int) -> np.ndarray:
+    """Indices of the objects that fill `num_slots`, in relevance order (SDC first). When they do not
+    all fit, the SDC, `tracks_to_predict` and `objects_of_interest` are kept before the rest."""
+    order = object_relevance_order(scenario)
+    if len(order) <= num_slots:
+        return order
+    # lexsort: the last key is the primary one; False sorts first, so negate the flags.
+    priority = np.lexsort((np.arange(len(order)), ~scenario.objects_of_interest[order],
+                           ~scenario.tracks_to_predict[order], ~scenario.is_sdc[order]))
+    kept = np.zeros(len(order), bool)
+    kept[priority[:num_slots]] = True
+    return order[kept]
+
+
+def _mean_light_positions(scenario: Scenario) -> np.ndarray:
+    """Mean valid stop point of each light; 1e9 for a light never valid (sorts last). -> (L, 2)"""
+    count = scenario.tl_valid.sum(axis=1)
+    xy = np.stack([np.where(scenario.tl_valid, scenario.tl_x, 0.0).sum(axis=1),
+                   np.where(scenario.tl_valid, scenario.tl_y, 0.0).sum(axis=1)], -1).astype(np.float64)
+    return np.where(count[:, None] > 0, xy / np.maximum(count, 1)[:, None], 1e9)
+
+
 def _take(scenario: Scenario, names, index: np.ndarray, axis: int = 0) -> dict:
     return {name: np.take(getattr(scenario, name), index, axis=axis) for name in names}
 
 
 def fit_to_budget(scenario: Scenario, sizes: Sizes) -> Scenario:
-    """SDC in slot 0, objects by relevance, every part cropped to the budget."""
+    """SDC in slot 0, objects by relevance (labelled ones kept first when over budget), every part cropped
+    to the budget."""
     changes: dict = {}
-    order = object_relevance_order(scenario)[: sizes.num_objects]
+    order = objects_to_keep(scenario, sizes.num_objects)
     if not np.array_equal(order, np.arange(scenario.num_objects)):
         changes.update(_take(scenario, _PER_OBJECT + _PER_OBJECT_STEP, order))
         if scenario.agent_path_object_index.size:
@@ -88,9 +114,7 @@ def fit_to_budget(scenario: Scenario, sizes: Sizes) -> Scenario:
         changes.update(_take(scenario, _PER_POINT, keep))
     num_lights = scenario.tl_state.shape[0]
     if num_lights > sizes.num_lights:
-        pos = np.stack([np.where(scenario.tl_valid, scenario.tl_x, np.nan).astype(np.float64),
-                        np.where(scenario.tl_valid, scenario.tl_y, np.nan)], -1)
-        mean = np.nan_to_num(np.nanmean(pos, axis=1), nan=1e9)
+        mean = _mean_light_positions(scenario)
         keep = np.sort(np.argsort(distance_to_polyline_points(mean, anchors), kind="stable")[: sizes.num_lights])
         changes.update(_take(scenario, _PER_LIGHT, keep))
     num_lanes = scenario.lane_id.shape[0]

@@ -3,11 +3,17 @@
 Tracks are resampled to 10 Hz when the description's sample rate differs, then cut into windows
 (see `scenariomax.sources.womd.windows`); only windows where the SDC is valid at every step are
 kept. String ids are mapped to ints with a stable table (see `stable_int_ids`).
+
+Descriptions from every MetaDrive / ScenarioNet generation are accepted: `metadata` may be empty
+or missing (the SDC and the time step are then derived, see `sdc_row` and `source_times`), and
+traffic lights may store their lane and stop point once or per step.
 """
 
 from __future__ import annotations
 
+import collections
 import functools
+import math
 from collections.abc import Iterator, Mapping
 from typing import Any
 
@@ -15,7 +21,13 @@ import numpy as np
 
 from scenariomax import schema as sch
 from scenariomax.enrich.budget import fit_to_budget
-from scenariomax.enrich.roadgraph import LaneLinks, MapPolyline, lane_graph_arrays, polylines_to_roadgraph
+from scenariomax.enrich.roadgraph import (
+    DEFAULT_SPACING_M,
+    LaneLinks,
+    MapPolyline,
+    lane_graph_arrays,
+    polylines_to_roadgraph,
+)
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
 from scenariomax.sources.womd.convert import ScenarioBuildError
@@ -26,12 +38,20 @@ SOURCE_NAME = "scenarionet"
 STEP_SECONDS = 0.1
 MPH_TO_MPS, KMH_TO_MPS = 0.44704, 1.0 / 3.6
 
+# What one description may make us build (the unpickler already caps the file and its expansion;
+# these cap what the conversion itself allocates, whatever the file's own numbers claim).
+MAX_TRACKS = 10_000
+MAX_CELLS = 4_000_000  # tracks x steps (source rate and 10 Hz), and lights x steps
+MAX_MAP_POINTS = 2_000_000  # roadgraph samples at DEFAULT_SPACING_M before the budget crop
+SDC_NAMES = ("ego", "sdc", "av", "default_agent")  # track keys that name the SDC when metadata does not
+
 OBJECT_TYPES = {"VEHICLE": sch.OBJECT_TYPE_VEHICLE, "PEDESTRIAN": sch.OBJECT_TYPE_PEDESTRIAN,
                 "CYCLIST": sch.OBJECT_TYPE_CYCLIST}  # anything else (barriers, cones, OTHER...) -> other
 MAP_TYPES = {
     "LANE_FREEWAY": sch.RG_LANE_FREEWAY, "LANE_SURFACE_STREET": sch.RG_LANE_SURFACE_STREET,
     "LANE_BIKE_LANE": sch.RG_LANE_BIKE, "LANE_UNKNOWN": sch.RG_LANE_SURFACE_STREET,
-    "ROAD_LINE_UNKNOWN": 0,
+    "LANE_SURFACE_UNSTRUCTURE": sch.RG_LANE_SURFACE_STREET,
+    "ROAD_LINE_UNKNOWN": 0, "UNKNOWN_LINE": 0,
     "ROAD_LINE_BROKEN_SINGLE_WHITE": sch.RG_BROKEN_SINGLE_WHITE,
     "ROAD_LINE_SOLID_SINGLE_WHITE": sch.RG_SOLID_SINGLE_WHITE,
     "ROAD_LINE_SOLID_DOUBLE_WHITE": sch.RG_SOLID_DOUBLE_WHITE,
@@ -42,11 +62,12 @@ MAP_TYPES = {
     "ROAD_LINE_PASSING_DOUBLE_YELLOW": sch.RG_PASSING_DOUBLE_YELLOW,
     "ROAD_EDGE_UNKNOWN": sch.RG_ROAD_EDGE_BOUNDARY, "ROAD_EDGE_BOUNDARY": sch.RG_ROAD_EDGE_BOUNDARY,
     "ROAD_EDGE_MEDIAN": sch.RG_ROAD_EDGE_MEDIAN, "ROAD_EDGE_SIDEWALK": sch.RG_ROAD_EDGE_BOUNDARY,
-    "STOP_SIGN": sch.RG_STOP_SIGN, "CROSSWALK": sch.RG_CROSSWALK, "SPEED_BUMP": sch.RG_SPEED_BUMP,
-    "DRIVEWAY": sch.RG_DRIVEWAY,
+    "STOP_SIGN": sch.RG_STOP_SIGN, "CROSSWALK": sch.RG_CROSSWALK, "CROSS_WALK": sch.RG_CROSSWALK,
+    "SPEED_BUMP": sch.RG_SPEED_BUMP, "DRIVEWAY": sch.RG_DRIVEWAY,
 }
 _CLOSED_TYPES = (sch.RG_CROSSWALK, sch.RG_SPEED_BUMP, sch.RG_DRIVEWAY)
-# MetaDrive light strings and WOMD lane-state strings -> WOMD light enum.
+# MetaDrive light strings and WOMD lane-state strings -> WOMD light enum. Early MetaDrive stored the
+# WOMD enum itself (ints 0..8), which is our enum too.
 LIGHT_STATES = {
     "TRAFFIC_LIGHT_RED": sch.TL_STOP, "TRAFFIC_LIGHT_YELLOW": sch.TL_CAUTION, "TRAFFIC_LIGHT_GREEN": sch.TL_GO,
     "TRAFFIC_LIGHT_UNKNOWN": sch.TL_UNKNOWN,
@@ -55,6 +76,7 @@ LIGHT_STATES = {
     "LANE_STATE_STOP": sch.TL_STOP, "LANE_STATE_CAUTION": sch.TL_CAUTION, "LANE_STATE_GO": sch.TL_GO,
     "LANE_STATE_FLASHING_STOP": sch.TL_FLASHING_STOP, "LANE_STATE_FLASHING_CAUTION": sch.TL_FLASHING_CAUTION,
 }
+_MAX_LIGHT_ENUM = sch.TL_FLASHING_CAUTION
 
 
 def stable_int_ids(keys) -> dict[Any, int]:
@@ -66,27 +88,118 @@ def stable_int_ids(keys) -> dict[Any, int]:
     return {k: rank for rank, k in enumerate(sorted(keys, key=str))}
 
 
-# --- times and resampling --------------------------------------------------------------------------
-def source_times(desc: Mapping, num_steps: int) -> np.ndarray:
-    """Seconds of each source step: metadata `ts` when it fits, else a fixed `timestep`/`sample_rate`."""
-    meta = desc.get("metadata", {}) or {}
-    ts = meta.get("ts")
-    if ts is not None and np.size(ts) == num_steps:
+# --- header: ids, SDC, times -----------------------------------------------------------------------
+def as_mapping(value) -> Mapping:
+    """`value` when it is a dict, else {} (early MetaDrive files leave parts out or use lists)."""
+    return value if isinstance(value, Mapping) else {}
+
+
+def _given(value) -> bool:
+    return value is not None and not (isinstance(value, str) and not value)
+
+
+def scenario_name(desc: Mapping, default: str = "unnamed") -> str:
+    meta = as_mapping(desc.get("metadata"))
+    for value in (meta.get("scenario_id"), meta.get("id"), desc.get("id")):
+        if _given(value) and isinstance(value, (str, int, np.integer, np.str_)):
+            return str(value)
+    return default
+
+
+def _track_key(tracks: Mapping, value):
+    """The key of `tracks` that `value` names (as stored, or spelt as str or int), else None."""
+    candidates = [value, str(value)]
+    if isinstance(value, str) and value.isdigit():
+        candidates.append(int(value))
+    for candidate in candidates:
+        try:
+            if candidate in tracks:
+                return candidate
+        except TypeError:  # unhashable value
+            continue
+    return None
+
+
+def named_sdc(desc: Mapping, keys: list) -> Any | None:
+    """The SDC track key the description names: metadata `sdc_id`, or the top-level `sdc_id` /
+    `sdc_track_index` / `sdc_index` of early MetaDrive files (a key, else a position). None when
+    nothing names it; ScenarioBuildError when the name matches no track."""
+    meta = as_mapping(desc.get("metadata"))
+    tracks = dict.fromkeys(keys)
+    for source, field in ((meta, "sdc_id"), (desc, "sdc_id"), (meta, "sdc_track_index"),
+                          (desc, "sdc_track_index"), (desc, "sdc_index")):
+        value = source.get(field)
+        if not _given(value):
+            continue
+        key = _track_key(tracks, value)
+        if key is not None:
+            return key
+        if field != "sdc_id" and isinstance(value, (int, np.integer)) and 0 <= value < len(keys):
+            return keys[int(value)]
+        raise ScenarioBuildError(f"{field} {value!r} is not a track")
+    return None
+
+
+def derived_sdc(keys: list, types: np.ndarray, valid: np.ndarray, position: np.ndarray) -> int:
+    """Row of the SDC when nothing names it: a track keyed "ego"/"sdc"/"av"/"default_agent", else the
+    vehicle valid at every step that travels furthest (the logging car is recorded throughout)."""
+    for row, key in enumerate(keys):
+        if str(key).lower() in SDC_NAMES:
+            return row
+    always = valid.all(axis=1) & (types == sch.OBJECT_TYPE_VEHICLE)
+    if not always.any():
+        raise ScenarioBuildError("no sdc_id, and no vehicle track is valid at every step to stand in for it")
+    travel = np.linalg.norm(np.diff(position[..., :2], axis=1), axis=-1).sum(axis=1)
+    return int(np.argmax(np.where(always, np.nan_to_num(travel, nan=-1.0), -2.0)))
+
+
+def _increasing_times(ts, num_steps: int) -> np.ndarray | None:
+    if ts is None or np.size(ts) != num_steps:
+        return None
+    try:
         times = np.asarray(ts, np.float64).ravel()
-        if num_steps < 2 or np.all(np.diff(times) > 0):
-            return times - times[0]
-    step = float(meta.get("timestep") or meta.get("sample_rate") or STEP_SECONDS)
-    if not step > 0:
+    except (TypeError, ValueError):
+        return None
+    if not np.all(np.isfinite(times)) or (num_steps > 1 and not np.all(np.diff(times) > 0)):
+        return None
+    return times - times[0]
+
+
+def source_times(desc: Mapping, num_steps: int) -> np.ndarray:
+    """Seconds of each source step: timestamps (`metadata.ts`, or the top-level `ts` of early
+    MetaDrive files) when one per step and increasing, else a fixed `timestep` / `sample_rate`,
+    else MetaDrive's 0.1 s."""
+    meta = as_mapping(desc.get("metadata"))
+    for ts in (meta.get("ts"), desc.get("ts")):
+        times = _increasing_times(ts, num_steps)
+        if times is not None:
+            return times
+    step = float(meta.get("timestep") or meta.get("sample_rate") or desc.get("timestep") or STEP_SECONDS)
+    if not (np.isfinite(step) and step > 0):
         raise ScenarioBuildError(f"bad time step {step}")
     return np.arange(num_steps) * step
+
+
+def is_nominal_10hz(times: np.ndarray) -> bool:
+    """Steps 0.1 s apart up to timestamp jitter (WOMD logs wobble by ~10 ms), no frame dropped."""
+    if len(times) < 2:
+        return True
+    steps = np.diff(times)
+    return abs(float(np.median(steps)) - STEP_SECONDS) < 1e-3 and bool(
+        np.all(np.abs(steps - STEP_SECONDS) < 0.5 * STEP_SECONDS))
+
+
+def grid_steps(times: np.ndarray) -> int:
+    """Number of 10 Hz steps covering `times` (from 0)."""
+    return int(np.floor(times[-1] / STEP_SECONDS + 1e-6)) + 1 if len(times) else 0
 
 
 def resample_indices(times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """For a 10 Hz grid over `times`: (lower index, upper index, weight of upper) per target step,
     or None when the source is already at 10 Hz."""
-    if len(times) < 2 or np.allclose(np.diff(times), STEP_SECONDS, atol=1e-3):
+    if is_nominal_10hz(times):
         return None
-    target = np.arange(int(np.floor(times[-1] / STEP_SECONDS + 1e-6)) + 1) * STEP_SECONDS
+    target = np.arange(grid_steps(times)) * STEP_SECONDS
     upper = np.clip(np.searchsorted(times, target - 1e-9), 0, len(times) - 1)
     lower = np.clip(upper - 1, 0, len(times) - 1)
     exact = np.isclose(times[upper], target, atol=1e-6)
@@ -96,6 +209,12 @@ def resample_indices(times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     return lower, upper, weight
 
 
+def check_cells(rows: int, steps: int, what: str) -> None:
+    """Refuses arrays of rows x steps beyond `MAX_CELLS` before they are allocated."""
+    if rows * steps > MAX_CELLS:
+        raise ScenarioBuildError(f"{rows} {what} x {steps} steps is more than the {MAX_CELLS} cells allowed")
+
+
 def _interp(values: np.ndarray, plan) -> np.ndarray:
     lower, upper, weight = plan
     w = weight.reshape((1, -1) + (1,) * (values.ndim - 2))
@@ -103,6 +222,19 @@ def _interp(values: np.ndarray, plan) -> np.ndarray:
 
 
 # --- tracks ----------------------------------------------------------------------------------------
+def track_state(key, track) -> Mapping:
+    state = track.get("state") if isinstance(track, Mapping) else None
+    if not isinstance(state, Mapping) or "valid" not in state:
+        raise ScenarioBuildError(f"track {key}: no state with 'valid'")
+    return state
+
+
+def common_length(tracks: Mapping) -> int:
+    """Steps per track: the most common length of `state.valid` (ScenarioNet tracks share one)."""
+    lengths = collections.Counter(int(np.size(track_state(key, track)["valid"])) for key, track in tracks.items())
+    return lengths.most_common(1)[0][0] if lengths else 0
+
+
 def _per_step(state: Mapping, key: str, num_steps: int, width: int | None = None) -> np.ndarray:
     value = np.asarray(state[key], np.float64)
     if width is None:
@@ -118,17 +250,29 @@ def track_arrays(tracks: Mapping, num_steps: int) -> dict[str, np.ndarray]:
     """Source-rate arrays: position (N, T, 3), heading/length/width/height (N, T), velocity (N, T, 2), valid."""
     rows = {name: [] for name in ("position", "heading", "velocity", "length", "width", "height", "valid")}
     for key, track in tracks.items():
-        state = track["state"]
+        state = track_state(key, track)
         try:
             rows["position"].append(_per_step(state, "position", num_steps, 3))
             rows["velocity"].append(_per_step(state, "velocity", num_steps, 2))
             for name in ("heading", "length", "width", "height", "valid"):
                 rows[name].append(_per_step(state, name, num_steps))
-        except (KeyError, ValueError) as error:
+        except (KeyError, ValueError, TypeError) as error:
             raise ScenarioBuildError(f"track {key}: bad state ({type(error).__name__}: {error})") from None
     out = {name: np.stack(values) if values else np.zeros((0, num_steps)) for name, values in rows.items()}
-    out["valid"] = out["valid"] > 0.5
+    out["valid"] = (out["valid"] > 0.5) & _finite_steps(out)
     return out
+
+
+def finite32(values: np.ndarray) -> np.ndarray:
+    """Where values survive the float32 shards (NaN, inf and 1e300 do not)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.isfinite(np.asarray(values).astype(np.float32))
+
+
+def _finite_steps(arrays: dict) -> np.ndarray:
+    """Steps with every value usable; a NaN position is not a valid step."""
+    finite = [finite32(arrays[name]) for name in ("position", "velocity", "heading", "length", "width", "height")]
+    return np.all([f.all(axis=-1) if f.ndim == 3 else f for f in finite], axis=0)
 
 
 def resample_tracks(arrays: dict, plan) -> dict:
@@ -146,7 +290,7 @@ def _xyz(points) -> np.ndarray:
     array = np.asarray(points, np.float64)
     if array.ndim == 1:
         array = array.reshape(1, -1)
-    if array.size == 0:
+    if array.size == 0 or array.ndim != 2:
         return np.zeros((0, 3))
     if array.shape[1] == 2:
         array = np.concatenate([array, np.zeros((len(array), 1))], axis=1)
@@ -158,9 +302,12 @@ def _link_ids(values, ids: Mapping) -> list[int]:
     for value in values if isinstance(values, (list, tuple, np.ndarray)) else []:
         key = value.get("feature_id", value.get("id")) if isinstance(value, Mapping) else value
         for candidate in (key, str(key)):
-            if candidate in ids:
-                out.append(ids[candidate])
-                break
+            try:
+                if candidate in ids:
+                    out.append(ids[candidate])
+                    break
+            except TypeError:  # unhashable
+                continue
     return out
 
 
@@ -172,22 +319,47 @@ def _speed_limit(feature: Mapping) -> float:
     return -1.0
 
 
+def map_features(desc: Mapping) -> Mapping:
+    """`map_features`, or `map` in the earliest MetaDrive files."""
+    features = desc.get("map_features")
+    return as_mapping(features if features is not None else desc.get("map"))
+
+
+def roadgraph_samples(polyline: MapPolyline, spacing: float = DEFAULT_SPACING_M) -> int:
+    """Upper bound of the points `resample_polyline` makes from this polyline (its length / spacing)."""
+    xy = polyline.xyz[:, :2]
+    if polyline.closed and len(xy) > 2:
+        xy = np.vstack([xy, xy[:1]])
+    if len(xy) < 2:
+        return len(xy)
+    length = float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum())
+    return math.ceil(min(length, 1e15) / spacing) + 1
+
+
+def _feature_points(feature: Mapping, rg_type: int) -> np.ndarray:
+    if rg_type == sch.RG_STOP_SIGN:
+        points = feature.get("position", feature.get("polyline", []))
+    elif rg_type in _CLOSED_TYPES:
+        points = feature.get("polygon", feature.get("polyline", []))
+    else:
+        points = feature.get("polyline", [])
+    points = _xyz(points)
+    return points[np.all(finite32(points), axis=1)]  # a NaN point would poison the resampling
+
+
 def map_polylines(features: Mapping, ids: Mapping) -> tuple[list[MapPolyline], list[LaneLinks]]:
     polylines, links = [], []
     for key, feature in features.items():
+        if not isinstance(feature, Mapping):
+            continue
         rg_type = MAP_TYPES.get(str(feature.get("type", "")))
         if rg_type is None:
             continue  # unknown feature kinds (e.g. drivable-area polygons) are not part of the roadgraph
-        fid = ids[key]
-        if rg_type == sch.RG_STOP_SIGN:
-            points = _xyz(feature.get("position", feature.get("polyline", [])))
-        elif rg_type in _CLOSED_TYPES:
-            points = _xyz(feature.get("polygon", feature.get("polyline", [])))
-        else:
-            points = _xyz(feature.get("polyline", []))
+        points = _feature_points(feature, rg_type)
         if len(points) == 0:
             continue
         is_lane = rg_type in sch.LANE_TYPES
+        fid = ids[key]
         polylines.append(MapPolyline(fid, rg_type, points, speed_limit=_speed_limit(feature) if is_lane else -1.0,
                                      closed=rg_type in _CLOSED_TYPES))
         if is_lane:
@@ -195,38 +367,99 @@ def map_polylines(features: Mapping, ids: Mapping) -> tuple[list[MapPolyline], l
                                    predecessors=_link_ids(feature.get("entry_lanes", []), ids),
                                    left_neighbors=_link_ids(feature.get("left_neighbor", []), ids),
                                    right_neighbors=_link_ids(feature.get("right_neighbor", []), ids)))
+    total = sum(roadgraph_samples(line) for line in polylines)
+    if total > MAX_MAP_POINTS:
+        raise ScenarioBuildError(f"map of {total} roadgraph points at {DEFAULT_SPACING_M:g} m is more than the "
+                                 f"{MAX_MAP_POINTS} allowed")
     return orient_road_edges(polylines, sch.ROAD_EDGE_TYPES, sch.LANE_TYPES), links
 
 
 # --- traffic lights --------------------------------------------------------------------------------
+def light_code(state) -> int | None:
+    """WOMD light enum of one step's state: a MetaDrive / WOMD string or an early-MetaDrive int."""
+    if state is None:
+        return None
+    if isinstance(state, (int, np.integer)) and not isinstance(state, (bool, np.bool_)):
+        return int(state) if 0 <= state <= _MAX_LIGHT_ENUM else sch.TL_UNKNOWN
+    return LIGHT_STATES.get(str(state), sch.TL_UNKNOWN)
+
+
+def _steps(value, num_steps: int) -> list:
+    """One entry per step: a single value repeated, or a sequence cut / padded with None (unknown)."""
+    if isinstance(value, (list, tuple, np.ndarray)) and np.ndim(value) >= 1:
+        values = list(value)
+        if len(values) == 1:
+            return values * num_steps
+        return values[:num_steps] + [None] * (num_steps - len(values))
+    return [value] * num_steps
+
+
+def light_lanes(value, ids: Mapping, num_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """(lane id per step, -1 unknown; True where the source wrote lane 0, early MetaDrive's filler)."""
+    raw = _steps(value, num_steps)
+    cache: dict[str, int] = {}
+    lanes = np.full(num_steps, -1, np.int64)
+    zero = np.zeros(num_steps, bool)
+    for step, lane in enumerate(raw):
+        if lane is None or isinstance(lane, (list, dict, np.ndarray)):
+            continue
+        text = str(lane)
+        if text not in cache:
+            found = _link_ids([lane], ids)
+            cache[text] = found[0] if found else -1
+        lanes[step] = cache[text]
+        zero[step] = text == "0"
+    return lanes, zero
+
+
+def light_points(value, num_steps: int) -> np.ndarray:
+    """Stop point per step (T, 3), NaN where unknown; one point or one per step."""
+    if value is None:
+        return np.full((num_steps, 3), np.nan)
+    try:
+        points = _xyz(value)
+    except (TypeError, ValueError):
+        return np.full((num_steps, 3), np.nan)
+    if len(points) == num_steps:
+        return points
+    if len(points) == 1:
+        return np.repeat(points, num_steps, axis=0)
+    return np.full((num_steps, 3), np.nan)
+
+
+def light_row(light: Mapping, ids: Mapping, num_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(codes, known, lane ids, stop points) at the source rate for one light. Lane and stop point
+    sit on the light (ScenarioNet) or per step in its state (early MetaDrive, which fills steps
+    without data with lane 0 and stop point (0, 0, 0): those steps are unknown)."""
+    state = as_mapping(light.get("state"))
+    codes = [light_code(s) for s in _steps(state.get("object_state"), num_steps)]
+    lane_value = light.get("lane") if light.get("lane") is not None else state.get("lane")
+    point_value = light.get("stop_point") if light.get("stop_point") is not None else state.get("stop_point")
+    lanes, zero_lane = light_lanes(lane_value, ids, num_steps)
+    points = light_points(point_value, num_steps)
+    filler = zero_lane & np.all(points == 0, axis=1)
+    known = np.array([c is not None for c in codes], bool) & (lanes >= 0) & np.all(finite32(points), axis=1) & ~filler
+    return np.array([c or 0 for c in codes], np.int64), known, lanes, points
+
+
 def light_arrays(lights: Mapping, ids: Mapping, num_steps: int, plan) -> dict[str, np.ndarray]:
     """(L, T10) arrays at 10 Hz (nearest earlier source step when resampling)."""
-    rows = []
-    for key in sorted(lights, key=str):
-        light = lights[key]
-        states = list((light.get("state") or {}).get("object_state", []))[:num_steps]
-        states += [None] * (num_steps - len(states))
-        lane = light.get("lane")
-        lane_id = _link_ids([lane], ids)
-        point = _xyz(light.get("stop_point", [np.nan, np.nan, np.nan]))[0] if light.get("stop_point") is not None \
-            else np.full(3, np.nan)
-        codes = np.array([LIGHT_STATES.get(str(s), sch.TL_UNKNOWN) for s in states], np.int64)
-        known = np.array([s is not None for s in states], bool) & bool(lane_id) & np.all(np.isfinite(point))
-        rows.append((codes, known, lane_id[0] if lane_id else -1, point))
+    check_cells(len(lights), num_steps, "traffic lights")
+    rows = [light_row(as_mapping(lights[key]), ids, num_steps) for key in sorted(lights, key=str)]
     if plan is not None:
         lower = plan[0]
-        rows = [(codes[lower], known[lower], lane, point) for codes, known, lane, point in rows]
+        rows = [(codes[lower], known[lower], lanes[lower], points[lower]) for codes, known, lanes, points in rows]
     steps = len(plan[0]) if plan is not None else num_steps
     shape = (len(rows), steps)
     out = dict(tl_state=np.zeros(shape, np.int64), tl_valid=np.zeros(shape, bool),
                tl_lane_id=np.full(shape, -1, np.int64), tl_x=np.full(shape, -1.0, np.float32),
                tl_y=np.full(shape, -1.0, np.float32), tl_z=np.full(shape, -1.0, np.float32))
-    for row, (codes, known, lane, point) in enumerate(rows):
+    for row, (codes, known, lanes, points) in enumerate(rows):
         out["tl_valid"][row] = known
         out["tl_state"][row] = np.where(known, codes, 0)
-        out["tl_lane_id"][row] = np.where(known, lane, -1)
+        out["tl_lane_id"][row] = np.where(known, lanes, -1)
         for axis, name in enumerate(("tl_x", "tl_y", "tl_z")):
-            out[name][row] = np.where(known, point[axis], -1.0)
+            out[name][row] = np.where(known, points[:, axis], -1.0)
     return out
 
 
@@ -236,62 +469,88 @@ def _window_field(values: np.ndarray, cut: slice, valid: np.ndarray) -> np.ndarr
     return np.where(valid, values[:, cut], -1.0).astype(np.float32)
 
 
-def _object_labels(meta: Mapping, keys: list, object_ids: np.ndarray, key_ids: Mapping) -> dict:
+def _object_labels(meta: Mapping, keys: list) -> dict:
     to_predict = np.zeros(len(keys), bool)
     difficulty = np.zeros(len(keys), np.int64)
-    row_of = {key: row for row, key in enumerate(keys)}
+    row_of = {str(key): row for row, key in enumerate(keys)}
     predictions = meta.get("tracks_to_predict") or {}
-    for track_key, info in (predictions.items() if isinstance(predictions, Mapping) else []):
+    if isinstance(predictions, Mapping):
+        entries = list(predictions.items())
+    else:  # a plain list of track keys
+        entries = [(key, None) for key in predictions] if isinstance(predictions, (list, tuple)) else []
+    for track_key, info in entries:
         track_key = info.get("track_id", track_key) if isinstance(info, Mapping) else track_key
-        for candidate in (track_key, str(track_key)):
-            if candidate in row_of:
-                to_predict[row_of[candidate]] = True
-                if isinstance(info, Mapping) and info.get("difficulty") is not None:
-                    difficulty[row_of[candidate]] = int(info["difficulty"])
-                break
-    interest = {str(k) for k in (meta.get("objects_of_interest") or [])}
+        row = row_of.get(str(track_key))
+        if row is None:
+            continue
+        to_predict[row] = True
+        if isinstance(info, Mapping) and info.get("difficulty") is not None:
+            difficulty[row] = int(info["difficulty"])
+    interest = meta.get("objects_of_interest") or []
+    interest = {str(k) for k in interest} if isinstance(interest, (list, tuple, set, np.ndarray)) else set()
     of_interest = np.array([str(key) in interest for key in keys], bool)
     return dict(tracks_to_predict=to_predict, difficulty_level=difficulty, objects_of_interest=of_interest)
 
 
-def description_windows(desc: Mapping, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE
-                        ) -> Iterator[Scenario | ScenarioBuildError]:
+def _window_times(times: np.ndarray | None, cut: slice, valid: np.ndarray) -> dict:
+    """Timestamps from the data when the source steps are the 10 Hz steps, else the schema default."""
+    if times is None:
+        return {}
+    micros = np.round((times[cut] - times[cut.start]) * 1e6).astype(np.int64)
+    return dict(timestamp_micros=np.where(valid, micros[None, :], -1), tl_timestamp_micros=micros)
+
+
+def description_windows(desc: Mapping, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE,
+                        default_id: str = "unnamed") -> Iterator[Scenario | ScenarioBuildError]:
     """Every 91-step window (SDC valid throughout) of one scenario description, fitted to the budget."""
-    if not isinstance(desc, Mapping) or "tracks" not in desc:
-        yield ScenarioBuildError("not a ScenarioNet scenario description (no 'tracks')")
+    if not isinstance(desc, Mapping) or not isinstance(desc.get("tracks"), Mapping):
+        yield ScenarioBuildError("not a ScenarioNet scenario description (no 'tracks' dict)")
         return
-    meta = desc.get("metadata", {}) or {}
-    scenario_id = str(meta.get("scenario_id", desc.get("id", "unnamed")))
+    scenario_id = scenario_name(desc, default_id)
+    try:
+        yield from _windows(desc, sizes, stride, scenario_id)
+    except ScenarioBuildError as error:
+        yield ScenarioBuildError(f"scenario {scenario_id}: {error}")
+
+
+def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iterator[Scenario]:
+    meta = as_mapping(desc.get("metadata"))
     tracks = desc["tracks"]
     keys = list(tracks)
-    sdc_key = meta.get("sdc_id")
-    if sdc_key not in tracks:
-        yield ScenarioBuildError(f"scenario {scenario_id}: sdc_id {sdc_key!r} is not a track")
-        return
-    num_steps = int(np.size(tracks[sdc_key]["state"]["valid"]))
+    if not keys or len(keys) > MAX_TRACKS:
+        raise ScenarioBuildError(f"{len(keys)} tracks (1 to {MAX_TRACKS} allowed)")
+    sdc_key = named_sdc(desc, keys)
+    num_steps = int(np.size(track_state(sdc_key, tracks[sdc_key])["valid"])) if sdc_key is not None \
+        else common_length(tracks)
+    check_cells(len(keys), num_steps, "tracks")
     times = source_times(desc, num_steps)
+    if not is_nominal_10hz(times):
+        check_cells(len(keys), grid_steps(times), "tracks (at 10 Hz)")
     plan = resample_indices(times)
-    arrays = resample_tracks(track_arrays(tracks, num_steps), plan)
+    source_arrays = track_arrays(tracks, num_steps)
+    object_types = np.array([OBJECT_TYPES.get(str(as_mapping(tracks[k]).get("type", "")), sch.OBJECT_TYPE_OTHER)
+                             for k in keys])
+    sdc = keys.index(sdc_key) if sdc_key is not None else derived_sdc(
+        keys, object_types, source_arrays["valid"], source_arrays["position"])
+    arrays = resample_tracks(source_arrays, plan)
     num_steps_10hz = arrays["valid"].shape[1]
-    current = int(meta.get("current_time_index", sizes.num_past)) if plan is None else sizes.num_past
+    given_current = meta.get("current_time_index")
+    current = int(given_current) if plan is None and _given(given_current) else sizes.num_past
     all_starts = window_starts(num_steps_10hz, current, sizes.num_past, sizes.num_timesteps, stride)
-    sdc = keys.index(sdc_key)
     starts = [s for s in all_starts if arrays["valid"][sdc, s:s + sizes.num_timesteps].all()]
     if not starts:
-        yield ScenarioBuildError(f"scenario {scenario_id}: no {sizes.num_timesteps}-step window at 10 Hz with the "
-                                 f"SDC valid throughout ({num_steps_10hz} steps)")
-        return
+        raise ScenarioBuildError(f"no {sizes.num_timesteps}-step window at 10 Hz with the SDC valid throughout "
+                                 f"({num_steps_10hz} steps)")
     key_ids = stable_int_ids(keys)
     object_ids = np.array([key_ids[k] for k in keys], np.int64)
-    object_types = np.array([OBJECT_TYPES.get(str(tracks[k].get("type", "")), sch.OBJECT_TYPE_OTHER) for k in keys])
     is_sdc = np.arange(len(keys)) == sdc
-    labels = _object_labels(meta, keys, object_ids, key_ids)
-    features = desc.get("map_features", {}) or {}
+    labels = _object_labels(meta, keys)
+    features = map_features(desc)
     map_ids = stable_int_ids(features)
     polylines, links = map_polylines(features, map_ids)
     roadgraph = polylines_to_roadgraph(polylines)
     lane_graph = lane_graph_arrays(links, sizes.num_lane_links)
-    lights = light_arrays(desc.get("dynamic_map_states", {}) or {}, map_ids, num_steps, plan)
+    lights = light_arrays(as_mapping(desc.get("dynamic_map_states")), map_ids, num_steps, plan)
     for start in starts:
         cut = slice(start, start + sizes.num_timesteps)
         valid = arrays["valid"][:, cut]
@@ -306,9 +565,11 @@ def description_windows(desc: Mapping, sizes: Sizes, stride: int = DEFAULT_WINDO
             bbox_yaw=field(wrap_angle(arrays["heading"])), length=field(arrays["length"]),
             width=field(arrays["width"]), height=field(arrays["height"]),
             velocity_x=field(velocity[..., 0]), velocity_y=field(velocity[..., 1]),
+            **_window_times(times if plan is None else None, cut, valid),
             **window_labels, **roadgraph, **lane_graph,
             **{name: value[:, cut] for name, value in lights.items()},
             source_dataset=SOURCE_NAME, current_time_index=sizes.num_past,
-            metadata={"dataset": str(meta.get("dataset", "")), "log_start_step": start},
+            metadata={"dataset": str(meta.get("dataset", "")), "log_start_step": start,
+                      "sdc_derived": sdc_key is None},
         )
         yield fit_to_budget(scenario, sizes)

@@ -151,10 +151,11 @@ def test_codec_round_trip(scenario):
     assert decoded.scenario_id == SCENARIO_ID
 
 
-def test_budget_drops_least_relevant_objects(tmp_path):
+def test_budget_keeps_the_focal_track_first(tmp_path):
+    # the focal car (100) is AV2's track to predict: it keeps its slot over the nearer cone (400)
     write_scenario_dir(tmp_path)
     (item,) = list(Av2Source(str(tmp_path), sizes=Sizes(num_objects=2)).read_unit(str(tmp_path / SCENARIO_ID)))
-    assert item.object_id[1:].tolist() == [400]
+    assert item.object_id[1:].tolist() == [100]
 
 
 def test_source_is_picklable_and_lists_units(tmp_path):

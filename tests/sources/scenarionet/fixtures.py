@@ -66,3 +66,40 @@ def write_pickle(path: Path, obj) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(pickle.dumps(obj, protocol=4))
     return path
+
+
+def early_metadrive_description(num_steps: int = 91, step_seconds: float = 0.1, with_ts: bool = True,
+                                sdc_index=None) -> dict:
+    """An early-MetaDrive style description (no `metadata`, digit-string keys, `ts` at the top, light
+    lane and stop point stored per step with 0 / (0, 0, 0) where the light was not reported).
+
+    Tracks: '7' drives east at 3 m/s on y = 0 (valid throughout: the SDC when nothing names it),
+    '8' is parked at (20, 4) (valid throughout, travels 0), '9' drives east at 10 m/s but is only
+    valid from step 5. Map: lane '11' (y = 0) and a CROSS_WALK '12'. Light on lane '11': not
+    reported for steps 0-19 (fillers), reported UNKNOWN (0) at 20-29, STOP (4) at 30-59, GO (6) after."""
+    t = np.arange(num_steps) * step_seconds
+    zeros, ones = np.zeros(num_steps), np.ones(num_steps)
+
+    def state(x, y, vx, valid):
+        return {"position": np.stack([x, y, zeros], 1), "heading": zeros.copy(), "velocity": np.stack([vx, zeros], 1),
+                "length": 4.5 * ones, "width": 2.0 * ones, "height": 1.5 * ones, "valid": valid.astype(float)}
+
+    late = np.arange(num_steps) >= 5
+    tracks = {"7": {"type": "VEHICLE", "state": state(3 * t, zeros, 3 * ones, ones > 0)},
+              "8": {"type": "VEHICLE", "state": state(20 + zeros, 4 + zeros, zeros, ones > 0)},
+              "9": {"type": "VEHICLE", "state": state(10 * t, 8 + zeros, 10 * ones, late)}}
+    codes = np.zeros(num_steps, np.int64)
+    codes[30:60], codes[60:] = 4, 6
+    lane = np.where(np.arange(num_steps) >= 20, 11, 0).astype(np.int64)
+    stop = np.where((lane > 0)[:, None], np.array([[40.0, 0.0, 0.0]]), 0.0)
+    desc = {"id": "early", "tracks": tracks,
+            "map_features": {"11": {"type": "LANE_SURFACE_STREET", "polyline": np.array([[0.0, 0.0], [300.0, 0.0]])},
+                             "12": {"type": "CROSS_WALK",
+                                    "polyline": np.array([[30.0, -2], [32, -2], [32, 2], [30, 2]])}},
+            "dynamic_map_states": {"11": {"type": "TRAFFIC_LIGHT",
+                                          "state": {"object_state": codes, "lane": lane, "stop_point": stop}}}}
+    if with_ts:
+        desc["ts"] = t + 5.0
+    if sdc_index is not None:
+        desc["sdc_index"] = sdc_index
+    return desc
