@@ -12,6 +12,7 @@ from scenariomax.sources.base import InputError
 
 
 def _fail(message: str) -> None:
+    message = message if len(message) <= 400 else message[:400] + " ..."
     click.echo(f"error: {message}", err=True)
     sys.exit(2)
 
@@ -28,7 +29,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 
 @click.group()
 def main() -> None:
-    """V-Max simulator: benchmark, evaluate policies, run the demo."""
+    """V-Max simulator: train and evaluate policies, benchmark, run the demo."""
 
 
 @main.command()
@@ -53,9 +54,51 @@ def _env_kinds(choice: str) -> tuple[str, ...]:
     return ("real", "minimal") if choice == "both" else (choice,)
 
 
+@main.command(context_settings={"ignore_unknown_options": False})
+@click.option("--preset", default="sac", show_default=True,
+              help="Words joined by dashes: algorithm (sac, ppo, bc, bc_sac), encoder (none, mlp, lq, lqh, mtr, "
+                   "wayformer), reward (safety, navigation, behavior), 'paper' for the paper's hyper-parameters.")
+@click.option("--data", default=None, help="Training shards (default: the embedded synthetic split).")
+@click.option("--eval-data", default=None, help="Held-out shards for evaluation (default: synthetic, disjoint seeds).")
+@click.option("--out", default=None, type=click.Path(file_okay=False),
+              help="Run directory (default: runs/<preset>-<time>).")
+@click.option("--resume", "resume_dir", default=None, type=click.Path(file_okay=False),
+              help="Continue this run directory from its last checkpoint.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.argument("overrides", nargs=-1)
+def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
+    """Train a policy. OVERRIDES are section.field=value, e.g. algo.learning_rate=3e-4 train.total_env_steps=1e5."""
+    import time as _time
+
+    from vmax_sim.training import apply_overrides, preset_config
+    from vmax_sim.training import train as run_training
+
+    try:
+        if resume_dir:
+            if overrides or data or eval_data:
+                _fail("--resume continues a run with its own config.json; drop the overrides and --data")
+            result = run_training(None, resume_dir, resume=True, progress=not quiet, print_fn=click.echo)
+        else:
+            config = preset_config(preset)
+            extra = [f"data.train={data}"] * bool(data) + [f"data.eval={eval_data}"] * bool(eval_data)
+            config = apply_overrides(config, extra + list(overrides))
+            run_dir = out or f"runs/{preset}-{_time.strftime('%Y%m%d-%H%M%S')}"
+            click.echo(f"run directory: {run_dir}")
+            result = run_training(config, run_dir, progress=not quiet, print_fn=click.echo)
+    except (InputError, ValueError, OSError) as error:
+        _fail(str(error).splitlines()[0] if str(error) else type(error).__name__)
+    click.echo(f"trained {result.env_steps:,} env steps in {result.wall_s / 60:.1f} min "
+               f"({result.env_steps_per_s:,.0f} env steps/s); run directory {result.run_dir}")
+    if result.final_evaluation:
+        from vmax_sim.evaluation import format_summary
+
+        click.echo(format_summary(result.final_evaluation))
+
+
 @main.command()
-@click.option("--policy", type=click.Choice(["expert", "constant"]), required=True)
-@click.option("--data", required=True, help="Shard directory, file or glob.")
+@click.option("--policy", required=True,
+              help="expert, constant, or a training run directory (its latest checkpoint).")
+@click.option("--data", default=None, help="Shard directory, file or glob (default for a run: its held-out split).")
 @click.option("--mode", default="non_reactive", show_default=True, help="Evaluation mode (non_reactive).")
 @click.option("--batch-size", type=click.IntRange(1), default=8, show_default=True)
 @click.option("--num-scenarios", type=click.IntRange(1), default=None, help="Evaluate only the first N.")
@@ -68,9 +111,16 @@ def evaluate(policy, data, mode, batch_size, num_scenarios, num_objects, as_json
     from vmax_sim.evaluation import evaluate as run_evaluation
     from vmax_sim.evaluation import format_summary
 
-    config = DataConfig(path=data, batch_size=batch_size, num_objects=num_objects)
     try:
-        result = run_evaluation(policy, config, mode=mode, num_scenarios=num_scenarios)
+        if policy in ("expert", "constant"):
+            if not data:
+                _fail("--data is required for the expert and constant policies")
+            config = DataConfig(path=data, batch_size=batch_size, num_objects=num_objects)
+            result = run_evaluation(policy, config, mode=mode, num_scenarios=num_scenarios)
+        else:
+            from vmax_sim.evaluation.trained import evaluate_run
+
+            result = evaluate_run(policy, data, mode=mode, num_scenarios=num_scenarios, batch_size=batch_size)
     except (InputError, ValueError, OSError) as error:
         _fail(str(error).splitlines()[0] if str(error) else type(error).__name__)
     text = json.dumps(result.summary, indent=2)
@@ -82,15 +132,21 @@ def evaluate(policy, data, mode, batch_size, num_scenarios, num_objects, as_json
 
 @main.command()
 @click.option("--out", default="runs/demo", show_default=True, type=click.Path(file_okay=False))
-@click.option("--num-scenarios", type=click.IntRange(1), default=32, show_default=True)
+@click.option("--num-scenarios", type=click.IntRange(1), default=64, show_default=True,
+              help="Synthetic training scenarios.")
+@click.option("--num-eval-scenarios", type=click.IntRange(1), default=32, show_default=True,
+              help="Held-out synthetic scenarios (next seed).")
+@click.option("--train-steps", type=click.IntRange(1), default=24_000, show_default=True,
+              help="Environment steps of the demo's training run.")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--workers", type=click.IntRange(1), default=None, help="Conversion workers (default: one per core).")
-def demo(out, num_scenarios, seed, workers):
-    """Generate synthetic scenarios, inspect and render them, evaluate the expert and a constant policy."""
+def demo(out, num_scenarios, num_eval_scenarios, train_steps, seed, workers):
+    """Synthetic scenarios -> shards -> inspect -> short training run -> evaluation table -> pictures."""
     from vmax_sim.demo import run_demo
 
     try:
-        run_demo(out, num_scenarios=num_scenarios, seed=seed, workers=workers, print_fn=click.echo)
+        run_demo(out, num_scenarios=num_scenarios, num_eval_scenarios=num_eval_scenarios, seed=seed,
+                 workers=workers, train_steps=train_steps, print_fn=click.echo)
     except (InputError, ValueError, OSError) as error:
         _fail(str(error).splitlines()[0] if str(error) else type(error).__name__)
 

@@ -34,18 +34,25 @@ def test_bench_rejects_bad_batch_sizes():
     assert result.exit_code == 2 and "comma-separated integers" in result.output
 
 
-def test_run_demo_writes_shards_picture_and_summary(tmp_path):
+def test_run_demo_trains_evaluates_and_draws(tmp_path):
     lines = []
-    summary = run_demo(tmp_path / "demo", num_scenarios=4, workers=1, batch_size=4, print_fn=lines.append)
+    tiny = ["network.mlp_hidden=32", "network.embed_dim=16", "network.output_dim=32", "algo.num_envs=4",
+            "algo.updates_per_step=2", "algo.policy_hidden_sizes=32", "train.chunk_steps=10", "train.pool_size=4"]
+    summary = run_demo(tmp_path / "demo", num_scenarios=4, num_eval_scenarios=4, workers=1, train_steps=80,
+                       print_fn=lines.append, progress=False, overrides=tiny)
     out = tmp_path / "demo"
-    assert (out / "scenario.png").stat().st_size > 1000
-    assert list((out / "shards").glob("*.tfrecord")) and (out / "shards" / "manifest.json").exists()
+    assert (out / "scenario.png").stat().st_size > 1000 and (out / "rollout.png").stat().st_size > 10_000
+    assert (out / "run" / "learning_curve.png").stat().st_size > 10_000
+    assert list((out / "shards").glob("*.tfrecord")) and (out / "eval_shards" / "manifest.json").exists()
     written = json.loads((out / "summary.json").read_text())
     assert written == json.loads(json.dumps(summary))
     assert set(written) >= {"shards", "scenario_png", "conversion", "inspect", "evaluation", "training"}
-    assert set(written["evaluation"]) == {"expert", "constant"}
+    assert set(written["evaluation"]) == {"expert", "constant", "trained bc-mlp-navigation"}
     for policy_summary in written["evaluation"].values():
         assert {"accuracy", "accuracy_at_fault", "nuplan_score", "vmax_score", "metrics"} <= set(policy_summary)
         assert policy_summary["num_episodes"] == 4
     assert written["evaluation"]["expert"]["accuracy"] == 1.0
-    assert any("training" in line for line in lines)
+    assert written["training"]["env_steps"] == 80
+    table = (out / "comparison.md").read_text()
+    assert table.startswith("| metric | expert | constant | trained bc-mlp-navigation |")
+    assert any(line.startswith("[3/5] training") for line in lines)

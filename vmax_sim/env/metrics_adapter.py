@@ -19,6 +19,7 @@ from vmax_sim.env.termination import TerminationFn, combine_termination_fns
 from vmax_sim.map_index import lane_candidates, nearest_lane, route_reference_arcs
 from vmax_sim.metrics import (
     MetricsConfig,
+    SharedQueries,
     StepInputs,
     offroad,
     overlaps,
@@ -26,7 +27,7 @@ from vmax_sim.metrics import (
     sdc_box_at,
     select_candidates,
 )
-from vmax_sim.observation import ObservationInputs
+from vmax_sim.observation import Observation, ObservationConfig, ObservationInputs, observe
 
 METRIC_HISTORY = 3  # steps of SDC history the per-step metrics need (finite differences)
 
@@ -135,6 +136,18 @@ def observation_inputs(state: SimulatorState, num_history: int = 5) -> Observati
         light_xy=jnp.stack([lights.x, lights.y], axis=-1), light_state=lights.state, light_valid=lights.valid,
         path_xy=paths.xy, path_valid=paths.valid, path_arc=paths.arc_length, path_on_route=paths.on_route,
     )
+
+
+def sdc_observation(state: SimulatorState, shared: SharedQueries, config: ObservationConfig,
+                    key: jax.Array | None = None) -> Observation:
+    """The SDC's observation of one unbatched state, reusing the metrics' candidate objects and path
+    projection of this step (`shared_queries`) when there are enough candidates."""
+    inputs = observation_inputs(state, config.num_history)
+    enough = shared.candidate_index.shape[0] >= config.num_objects
+    candidates = ((shared.candidate_index[:config.num_objects], shared.candidate_valid[:config.num_objects])
+                  if enough else None)
+    return observe(state.map_index, inputs, config, key=key, candidates=candidates,
+                   path_projection=shared.path_projection)
 
 
 # ----------------------------------------------------------------------------- termination

@@ -90,6 +90,19 @@ def _batches(data, config: DataConfig, num_scenarios: int | None) -> Iterator[tu
         yield ids, stack_states(states), real
 
 
+@dataclasses.dataclass(frozen=True)
+class PreparedBatches:
+    """Host batches converted once (map indices built), to evaluate many times without converting again."""
+
+    batches: tuple  # (scenario ids, numpy SimulatorState (batch_size, ...), number of real ones) per batch
+    data_config: DataConfig
+
+
+def prepare_batches(data, num_scenarios: int | None = None) -> PreparedBatches:
+    """Converts `data` (a DataConfig with its path and batch_size) once for repeated evaluations."""
+    return PreparedBatches(batches=tuple(_batches(data, data, num_scenarios)), data_config=data)
+
+
 def _summary(episodes: dict[str, np.ndarray], policy: str, mode: str) -> dict:
     means = {k: float(np.mean(v)) for k, v in episodes.items()}
     summary = {"policy": policy, "mode": mode, "num_episodes": int(len(next(iter(episodes.values()))))}
@@ -104,7 +117,7 @@ def _summary(episodes: dict[str, np.ndarray], policy: str, mode: str) -> dict:
 def evaluate(policy, data, mode: str = "non_reactive", *, data_config: DataConfig | None = None,
              env_config: EnvConfig | None = None, metrics_config: MetricsConfig | None = None,
              obs_config: ObservationConfig | None = None, num_scenarios: int | None = None,
-             batch_size: int | None = None, seed: int = 0) -> EvaluationResult:
+             batch_size: int | None = None, seed: int = 0, policy_params=None) -> EvaluationResult:
     """Runs one episode per scenario and scores it.
 
     policy: "expert", "constant", a `Policy`, or a jittable callable `fn(observation, key)` returning the
@@ -112,9 +125,12 @@ def evaluate(policy, data, mode: str = "non_reactive", *, data_config: DataConfi
     roadgraph and path sizes, batch_size), a shard path, or scenarios. Episodes start at
     env_config.init_steps - 1 (step 10) and run episode_length (80) steps in one jitted `lax.scan`,
     vmapped over the batch; by default an episode ends early on collision, off-road or red light
-    (env_config.terminate_on).
+    (env_config.terminate_on). policy_params: the parameters handed to the policy's action_fn (a
+    trained policy's network weights; an argument of the jitted rollout, so new ones never recompile).
     """
     _check_mode(mode)
+    if isinstance(data, PreparedBatches):
+        data_config = data.data_config
     if isinstance(data, DataConfig):
         data_config = data_config or data
     data_config = data_config or DataConfig()
@@ -132,12 +148,14 @@ def evaluate(policy, data, mode: str = "non_reactive", *, data_config: DataConfi
     chosen = _named_policy(policy, env) if isinstance(policy, str) else make_policy(policy, env)
     rollout_fn = make_rollout_fn(env, chosen, metrics_config, obs_config)
 
+    params = policy_params
     key = jax.random.PRNGKey(seed)
     collected: dict[str, list[np.ndarray]] = {}
     scenario_ids: list[str] = []
-    for ids, batch, real in _batches(data, data_config, num_scenarios):
+    batches = data.batches if isinstance(data, PreparedBatches) else _batches(data, data_config, num_scenarios)
+    for ids, batch, real in batches:
         key, batch_key = jax.random.split(key)
-        rollout = rollout_fn(jax.device_put(batch), jax.random.split(batch_key, data_config.batch_size))
+        rollout = rollout_fn(jax.device_put(batch), jax.random.split(batch_key, data_config.batch_size), params)
         for name, values in rollout.episode.items():
             collected.setdefault(name, []).append(np.asarray(values)[:real])
         scenario_ids += ids

@@ -15,10 +15,10 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.datatypes import SimulatorState
-from vmax_sim.env.metrics_adapter import observation_inputs, reference_arcs, step_inputs
+from vmax_sim.env.metrics_adapter import reference_arcs, sdc_observation, step_inputs
 from vmax_sim.evaluation.policies import Policy
-from vmax_sim.metrics import MetricsConfig, SharedQueries, episode_metrics, shared_queries, step_metrics
-from vmax_sim.observation import ObservationConfig, observe
+from vmax_sim.metrics import MetricsConfig, episode_metrics, shared_queries, step_metrics
+from vmax_sim.observation import ObservationConfig
 
 
 @flax.struct.dataclass
@@ -31,17 +31,8 @@ class Rollout:
     episode: dict  # name -> (...) float32, `episode_metrics` over the valid steps
 
 
-def _observation(state: SimulatorState, shared: SharedQueries, config: ObservationConfig):
-    inputs = observation_inputs(state, config.num_history)
-    return observe(state.map_index, inputs, config,
-                   candidates=(shared.candidate_index[:config.num_objects],
-                               shared.candidate_valid[:config.num_objects])
-                   if shared.candidate_index.shape[0] >= config.num_objects else None,
-                   path_projection=shared.path_projection)
-
-
 def run_episode(env, policy: Policy, state: SimulatorState, key: jax.Array, metrics_config: MetricsConfig,
-                obs_config: ObservationConfig) -> Rollout:
+                obs_config: ObservationConfig, params=None) -> Rollout:
     """One unbatched episode from the log state `state` (any timestep): reset, then
     `env.config.episode_length` policy steps; metrics after every step; steps after the first
     termination are masked out of the episode metrics."""
@@ -51,8 +42,8 @@ def run_episode(env, policy: Policy, state: SimulatorState, key: jax.Array, metr
 
     def body(carry, step_key):
         state, done, shared = carry
-        observation = _observation(state, shared, obs_config) if policy.needs_observation else None
-        action = policy.action_fn(state, observation, step_key)
+        observation = sdc_observation(state, shared, obs_config) if policy.needs_observation else None
+        action = policy.action_fn(params, state, observation, step_key)
         state = env.step(state, action)
         inputs = step_inputs(state, arcs)
         shared = shared_queries(inputs, metrics_config)  # reused by next step's observation
@@ -70,7 +61,8 @@ def run_episode(env, policy: Policy, state: SimulatorState, key: jax.Array, metr
 
 @functools.lru_cache(maxsize=16)
 def make_rollout_fn(env, policy: Policy, metrics_config: MetricsConfig,
-                    obs_config: ObservationConfig) -> Callable[[SimulatorState, jax.Array], Rollout]:
-    """Jitted batched episodes: states (B, ...), keys (B, 2) -> Rollout with leading axis B."""
-    episode = functools.partial(run_episode, env, policy, metrics_config=metrics_config, obs_config=obs_config)
-    return jax.jit(jax.vmap(episode))
+                    obs_config: ObservationConfig) -> Callable[[SimulatorState, jax.Array, object], Rollout]:
+    """Jitted batched episodes: states (B, ...), keys (B, 2), policy params (shared) -> Rollout, leading axis B."""
+    def episode(state, key, params):
+        return run_episode(env, policy, state, key, metrics_config, obs_config, params)
+    return jax.jit(jax.vmap(episode, in_axes=(0, 0, None)))

@@ -164,7 +164,8 @@ def step_metrics(map_index: MapIndex, inputs: StepInputs, config: MetricsConfig 
     Keys: overlap, offroad, offroad_distance, wrong_way, off_route, progress_ratio,
     log_divergence, kinematic_infeasibility, at_fault_collision, ttc, ttc_violation, speed,
     speed_limit, speed_violation, lane_progress, red_light, multiple_lanes, ego_progress,
-    expert_progress, sdc_x, sdc_y, sdc_yaw (the last three feed the episode's comfort metric).
+    expert_progress, sdc_x, sdc_y, sdc_yaw (these three feed the episode's comfort metric), accel and
+    yaw_rate (finite differences; the per-step comfort reward term reads them).
     vmap over a leading batch axis of both arguments for batches. `shared` (from
     `shared_queries`) lets the observation reuse the same candidate objects and path projection.
     """
@@ -233,5 +234,6 @@ def step_metrics(map_index: MapIndex, inputs: StepInputs, config: MetricsConfig 
         "lane_progress": lane_progress, "red_light": red, "multiple_lanes": multiple,
         "ego_progress": ego_progress, "expert_progress": expert_progress,
         "sdc_x": xy[0], "sdc_y": xy[1], "sdc_yaw": yaw,
+        "accel": motion["accel"], "yaw_rate": motion["yaw_rate"],
     }
     return {k: jnp.asarray(v, jnp.float32) for k, v in out.items()}

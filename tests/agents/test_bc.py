@@ -1,0 +1,112 @@
+"""BC and BC+SAC: the imitation loss on hand values, BC learning the toy expert, and BC+SAC's schedule."""
+
+import math
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from tests.agents import toy
+from vmax_sim.agents import distributions as D
+from vmax_sim.agents import get_config, make_learner
+from vmax_sim.agents.bc import losses as bc_losses
+from vmax_sim.agents.bc_sac.losses import bc_weight_at, make_actor_loss
+from vmax_sim.agents.sac.losses import make_losses
+from vmax_sim.agents.sac.networks import make_networks
+
+
+def test_bc_negative_log_likelihood_hand_value():
+    # one 1-D sample: pre-tanh N(0, 1), expert action tanh(0.5):
+    # -log p = 0.125 + 0.5 log(2 pi) + log(1 - tanh(0.5)^2)
+    dist = D.TanhGaussian(loc=jnp.zeros((1, 1)), log_std=jnp.zeros((1, 1)))
+    expert = jnp.full((1, 1), math.tanh(0.5))
+    expected = 0.125 + 0.5 * math.log(2 * math.pi) + math.log(1 - math.tanh(0.5) ** 2)
+    np.testing.assert_allclose(bc_losses.nll_loss(dist, expert, 1e-3), expected, rtol=1e-5)
+    # the mode MSE: (tanh(0) - tanh(0.5))^2; the weighted sum
+    np.testing.assert_allclose(bc_losses.mode_mse_loss(dist, expert), math.tanh(0.5) ** 2, rtol=1e-6)
+    loss, metrics = bc_losses.bc_loss(dist, expert, nll_weight=1.0, mse_weight=0.5, eps=1e-3)
+    np.testing.assert_allclose(loss, expected + 0.5 * math.tanh(0.5) ** 2, rtol=1e-5)
+    np.testing.assert_allclose(metrics["bc_mae"], math.tanh(0.5), rtol=1e-6)
+
+
+def test_bc_clips_expert_actions_on_the_bounds():
+    dist = D.TanhGaussian(loc=jnp.zeros((2, 1)), log_std=jnp.zeros((2, 1)))
+    at_bound = bc_losses.nll_loss(dist, jnp.array([[1.0], [-1.0]]), 1e-3)
+    inside = bc_losses.nll_loss(dist, jnp.array([[1 - 1e-3], [-1 + 1e-3]]), 1e-3)
+    assert bool(jnp.isfinite(at_bound))
+    np.testing.assert_allclose(at_bound, inside, rtol=1e-6)
+
+
+def test_bc_learns_the_toy_expert():
+    config = get_config("bc", "debug", learning_rate=1e-3)
+    learner = make_learner("bc", config, lambda: toy.ToyEncoder(32), toy.ACTION_DIM)
+    state = learner.init(jax.random.key(0), toy.observe(toy.reset(jax.random.key(0), 2)))
+
+    @jax.jit
+    def train(state):
+        def body(state, key):
+            return learner.update(state, toy.random_batch(key, 128), key)
+        return jax.lax.scan(body, state, jax.random.split(jax.random.key(1), 1000))
+
+    state, metrics = train(state)
+    held_out = toy.random_batch(jax.random.key(5), 1000)
+    params = learner.policy_params(state)
+    action = learner.act(params, held_out.obs, jax.random.key(0), True)
+    assert float(jnp.mean(jnp.abs(action - held_out.expert_action))) < 0.03
+    assert float(metrics["bc_nll"][-1]) < float(metrics["bc_nll"][0]) - 2.0
+    closed_loop = toy.episode_return(lambda obs, key: learner.act(params, obs, key, True), jax.random.key(1))
+    assert closed_loop > -0.5  # the expert scores about -0.1, a random policy about -23
+
+
+def test_bc_sac_schedule():
+    steps = jnp.arange(6)
+    np.testing.assert_allclose(jax.vmap(lambda s: bc_weight_at(s, 2, 0.7))(steps), [0.7, 0, 0.7, 0, 0.7, 0],
+                               rtol=1e-6)
+    np.testing.assert_allclose(jax.vmap(lambda s: bc_weight_at(s, 1, 0.3))(steps), [0.3] * 6, rtol=1e-6)
+
+
+def test_bc_sac_actor_loss_is_sac_plus_weighted_bc_on_schedule():
+    config = get_config("bc_sac", "debug", bc_every=3, bc_weight=0.5, policy_hidden_sizes=(8,),
+                        value_hidden_sizes=(8,))
+    batch = toy.random_batch(jax.random.key(0), 16)
+    networks = make_networks(config, lambda: toy.ToyEncoder(4), 1)
+    sac = make_losses(networks, config)
+    actor_loss = make_actor_loss(networks, sac, config)
+    actor_params = networks.actor.init(jax.random.key(1), batch.obs)
+    critic_params = networks.critic.init(jax.random.key(2), batch.obs, batch.action)
+    key, alpha = jax.random.key(3), jnp.float32(0.2)
+
+    @jax.jit
+    def losses(step):
+        total, (log_prob, metrics) = actor_loss(actor_params, critic_params, alpha, batch, key, step)
+        rl, _ = sac.actor(actor_params, critic_params, alpha, batch, key)
+        bc, _ = bc_losses.bc_loss(networks.actor.apply(actor_params, batch.obs), batch.expert_action,
+                                  eps=config.expert_action_eps)
+        return total, rl, bc, metrics["bc_weight"]
+
+    total, rl, bc, weight = losses(jnp.int32(3))
+    np.testing.assert_allclose(total, rl + 0.5 * bc, rtol=1e-5)
+    assert float(weight) == 0.5
+    total, rl, _, weight = losses(jnp.int32(4))
+    np.testing.assert_allclose(total, rl, rtol=1e-6)
+    assert float(weight) == 0.0
+
+
+@pytest.mark.parametrize("algo", ["bc", "bc_sac"])
+def test_update_deterministic_and_no_retrace(algo):
+    config = get_config(algo, "debug", policy_hidden_sizes=(8,), **({} if algo == "bc" else
+                                                                    {"value_hidden_sizes": (8,)}))
+    learner = make_learner(algo, config, lambda: toy.ToyEncoder(8), 1)
+    batch = toy.random_batch(jax.random.key(0), 16)
+    state = learner.init(jax.random.key(0), batch.obs)
+    update = jax.jit(chex.assert_max_traces(learner.update, n=1))
+    first, metrics = update(state, batch, jax.random.key(1))
+    again, metrics_again = update(state, batch, jax.random.key(1))
+    toy.assert_trees_equal((first, metrics), (again, metrics_again))
+    for i in range(3):
+        first, metrics = update(first, toy.random_batch(jax.random.key(i), 16), jax.random.key(i))
+    assert int(first.step) == 4
+    assert "bc_loss" in metrics
+    assert all(m.shape == () and m.dtype == jnp.float32 and bool(jnp.isfinite(m)) for m in metrics.values())

@@ -1,0 +1,148 @@
+"""PPO: GAE on a hand-worked rollout with a termination and a truncation, the clipped objectives, and
+learning / determinism / no-recompile checks."""
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from tests.agents import toy
+from vmax_sim.agents import get_config, make_learner
+from vmax_sim.agents.ppo import losses as L
+
+GAMMA, LAMBDA = 0.9, 0.8
+
+
+def test_gae_hand_worked_with_termination_and_truncation():
+    # One env, 3 steps: step 0 ordinary, step 1 truncated by the time limit (V(next_obs_1) = 2.0, the true
+    # last state; obs_2 starts a new episode), step 2 terminated. The bootstrap value 4.0 must not be used.
+    rewards = jnp.array([[1.0], [2.0], [3.0]])
+    values = jnp.array([[0.5], [1.0], [1.5]])
+    discounts = jnp.array([[1.0], [1.0], [0.0]])
+    dones = jnp.array([[False], [True], [True]])
+    truncated = jnp.array([[False], [True], [False]])
+    truncation_values = jnp.array([[99.0], [2.0], [99.0]])  # V(next_obs) where it is needed
+    next_values = L.next_values_with_truncation(values, jnp.array([4.0]), truncated, truncation_values)
+    np.testing.assert_allclose(next_values[:, 0], [1.0, 2.0, 4.0])
+    advantages, returns = L.compute_gae(rewards, values, next_values, discounts, dones, GAMMA, LAMBDA)
+    # delta_2 = 3 - 1.5 = 1.5                         A_2 = 1.5           (terminated: no bootstrap)
+    # delta_1 = 2 + 0.9 * 2.0 - 1.0 = 2.8             A_1 = 2.8           (truncated: bootstrap, cut)
+    # delta_0 = 1 + 0.9 * 1.0 - 0.5 = 1.4             A_0 = 1.4 + 0.9 * 0.8 * 2.8 = 3.416
+    np.testing.assert_allclose(advantages[:, 0], [3.416, 2.8, 1.5], rtol=1e-6)
+    np.testing.assert_allclose(returns[:, 0], [3.916, 3.8, 3.0], rtol=1e-6)
+
+
+def test_gae_bootstraps_past_the_rollout_end_and_runs_per_env():
+    rewards = jnp.array([[1.0, 0.0], [2.0, 0.0], [3.0, 1.0]])
+    values = jnp.array([[0.5, 0.0], [1.0, 0.0], [1.5, 0.0]])
+    ones, falses = jnp.ones((3, 2)), jnp.zeros((3, 2), bool)
+    next_values = L.next_values_with_truncation(values, jnp.array([4.0, 10.0]), falses, jnp.zeros((3, 2)))
+    advantages, _ = L.compute_gae(rewards, values, next_values, ones, falses, GAMMA, LAMBDA)
+    d2 = 3 + 0.9 * 4.0 - 1.5
+    d1 = 2 + 0.9 * 1.5 - 1.0
+    d0 = 1 + 0.9 * 1.0 - 0.5
+    np.testing.assert_allclose(advantages[:, 0], [d0 + 0.72 * (d1 + 0.72 * d2), d1 + 0.72 * d2, d2], rtol=1e-6)
+    np.testing.assert_allclose(advantages[:, 1], [0.72 ** 2 * 10.0, 0.72 * 10.0, 1 + 9.0], rtol=1e-6)
+    # lambda = 1, gamma = 1: advantages are returns-to-go minus V
+    adv1, _ = L.compute_gae(rewards, values, next_values, ones, falses, 1.0, 1.0)
+    np.testing.assert_allclose(adv1[:, 0], [1 + 2 + 3 + 4 - 0.5, 2 + 3 + 4 - 1.0, 3 + 4 - 1.5], rtol=1e-6)
+
+
+def test_clipped_surrogate_hand_values():
+    log_prob = jnp.log(jnp.array([1.5, 0.5, 1.5, 0.5, 1.1]))
+    old = jnp.zeros(5)
+    advantages = jnp.array([1.0, 1.0, -1.0, -1.0, 2.0])
+    # min(r A, clip(r) A): 1.2, 0.5, -1.5, -0.8, 2.2
+    loss, clip_fraction = L.clipped_surrogate_loss(log_prob, old, advantages, 0.2)
+    np.testing.assert_allclose(loss, -(1.2 + 0.5 - 1.5 - 0.8 + 2.2) / 5, rtol=1e-6)
+    np.testing.assert_allclose(clip_fraction, 0.8)
+    # the clipped side carries no gradient: d/dlogp of the first entry is 0, of the last is r * A / N
+    grad = jax.grad(lambda lp: L.clipped_surrogate_loss(lp, old, advantages, 0.2)[0])(log_prob)
+    np.testing.assert_allclose(grad, [0.0, -0.5 / 5, -1.5 * -1 / 5, 0.0, -1.1 * 2 / 5], rtol=1e-5, atol=1e-7)
+
+
+def test_value_loss_plain_and_clipped():
+    values, old, returns = jnp.array([1.0, 3.0]), jnp.array([1.5, 1.5]), jnp.array([0.0, 2.0])
+    np.testing.assert_allclose(L.value_loss(values, returns), 0.5 * (1 + 1) / 2)
+    # clipped predictions [1.3, 1.7] -> squared errors [1.69, 0.09]; max with [1, 1] -> [1.69, 1]
+    np.testing.assert_allclose(L.value_loss(values, returns, old, 0.2), 0.5 * (1.69 + 1.0) / 2, rtol=1e-6)
+
+
+def test_normalize_and_kl():
+    x = jnp.array([1.0, 2.0, 3.0, 4.0])
+    np.testing.assert_allclose(jnp.mean(L.normalize(x)), 0.0, atol=1e-6)
+    np.testing.assert_allclose(jnp.std(L.normalize(x)), 1.0, rtol=1e-5)
+    assert float(L.approx_kl(x, x)) == 0.0 and float(L.approx_kl(x, x + 0.1)) > 0
+
+
+CONFIG = get_config("ppo", "debug", gamma=GAMMA, num_minibatches=4, num_epochs=2, policy_hidden_sizes=(16,),
+                    value_hidden_sizes=(16,))
+
+
+@pytest.fixture(scope="module")
+def setup():
+    learner = make_learner("ppo", CONFIG, lambda: toy.ToyEncoder(8), toy.ACTION_DIM)
+    state = learner.init(jax.random.key(0), toy.observe(toy.reset(jax.random.key(0), 4)))
+
+    @jax.jit
+    def rollout(key):  # T = 12, B = 4, truncation mid-rollout (episodes already 15 steps in)
+        env_state = toy.reset(key, 4).replace(t=jnp.full((4,), toy.EPISODE_LENGTH - 5, jnp.int32))
+
+        def body(env_state, step_key):
+            act_key, env_key = jax.random.split(step_key)
+            action, info = learner.act_with_info(learner.policy_params(state), toy.observe(env_state), act_key)
+            env_state, tr = toy.step(env_key, env_state, action)
+            return env_state, tr.replace(log_prob=info["log_prob"], value=info["value"])
+
+        return jax.lax.scan(body, env_state, jax.random.split(key, 12))[1]
+
+    return learner, state, rollout(jax.random.key(1))
+
+
+def test_first_minibatch_ratio_is_one(setup):
+    learner, state, rollout = setup
+    assert bool(jnp.any(rollout.truncated))
+    from vmax_sim.agents.ppo.networks import make_networks
+
+    loss = L.make_loss(make_networks(CONFIG, lambda: toy.ToyEncoder(8), 1), CONFIG)
+    flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), rollout)
+    batch = L.PPOBatch(obs=flat.obs, action=flat.action, log_prob=flat.log_prob, value=flat.value,
+                       advantage=jnp.ones(48), target=flat.value)
+    _, metrics = jax.jit(loss)(state.params, batch, jax.random.key(0))
+    assert float(metrics["clip_fraction"]) == 0.0
+    assert abs(float(metrics["approx_kl"])) < 1e-6
+
+
+def test_update_deterministic_and_no_retrace(setup):
+    learner, state, rollout = setup
+    update = jax.jit(chex.assert_max_traces(learner.update, n=1))
+    bootstrap = learner.value(state.params, jax.tree.map(lambda x: x[-1], rollout.next_obs))
+    first, metrics = update(state, rollout, jax.random.key(3), bootstrap_value=bootstrap)
+    again, metrics_again = update(state, rollout, jax.random.key(3), bootstrap_value=bootstrap)
+    toy.assert_trees_equal((first, metrics), (again, metrics_again))
+    for i in range(2):
+        first, metrics = update(first, rollout, jax.random.key(i), bootstrap_value=bootstrap)
+    assert int(first.step) == 3
+    assert all(m.shape == () and m.dtype == jnp.float32 and bool(jnp.isfinite(m)) for m in metrics.values())
+    assert {"policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction"} <= set(metrics)
+
+
+def test_update_rejects_a_rollout_that_does_not_split_into_minibatches(setup):
+    learner, state, rollout = setup
+    odd = jax.tree.map(lambda x: x[:11, :3], rollout)  # 33 transitions for 4 minibatches
+    with pytest.raises(ValueError, match="minibatches"):
+        learner.update(state, odd, jax.random.key(0))
+
+
+def test_ppo_learns_the_toy_task():
+    config = get_config("ppo", "debug", gamma=GAMMA, learning_rate=3e-4, num_minibatches=4, num_epochs=4)
+    learner = make_learner("ppo", config, lambda: toy.ToyEncoder(32), toy.ACTION_DIM)
+    state, metrics = toy.train_on_policy(learner, jax.random.key(0), num_envs=32, unroll_length=16,
+                                         num_updates=200, pass_bootstrap=False)
+    params = learner.policy_params(state)
+    trained = toy.episode_return(lambda obs, key: learner.act(params, obs, key, True), jax.random.key(1))
+    random = toy.episode_return(toy.random_policy, jax.random.key(1))
+    assert all(bool(jnp.isfinite(m)) for m in metrics.values())
+    assert random < -15.0
+    assert trained > -4.0, (float(trained), float(random))

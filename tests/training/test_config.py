@@ -1,0 +1,56 @@
+"""Presets, key=value overrides and the run directory's config round trip."""
+
+from __future__ import annotations
+
+import pytest
+
+from vmax_sim.agents import PPOConfig, SACConfig
+from vmax_sim.training import apply_overrides, config_from_dict, config_to_dict, preset_config
+
+
+def test_preset_names_choose_algorithm_encoder_reward_and_paper_settings():
+    config = preset_config("sac-lq-navigation")
+    assert (config.algo, config.network.name, config.reward.preset) == ("sac", "lq", "navigation")
+    paper = preset_config("paper-ppo-wayformer-behavior")
+    assert isinstance(paper.algo_config, PPOConfig) and paper.algo_preset == "paper"
+    assert paper.network.name == "wayformer" and paper.reward.preset == "behavior"
+    with pytest.raises(ValueError, match="unknown preset word 'transformer'"):
+        preset_config("sac-transformer")
+
+
+def test_overrides_are_typed():
+    config = apply_overrides(preset_config("sac"), [
+        "algo.learning_rate=3e-4", "algo.buffer_size=1e5", "network.embed_dim=32", "algo.learn_alpha=false",
+        "train.total_env_steps=50_000", "reward.weights=collision:-2,progress:0.5", "obs.noise.position_std=0.2",
+        "algo.policy_hidden_sizes=128,64", "env.terminate_on=collision,offroad"])
+    assert isinstance(config.algo_config, SACConfig)
+    assert config.algo_config.learning_rate == 3e-4 and config.algo_config.buffer_size == 100_000
+    assert config.algo_config.learn_alpha is False and config.algo_config.policy_hidden_sizes == (128, 64)
+    assert config.network.embed_dim == 32 and config.train.total_env_steps == 50_000
+    assert config.reward.weights == (("collision", -2.0), ("progress", 0.5))
+    assert config.obs.noise.position_std == 0.2 and config.env.terminate_on == ("collision", "offroad")
+
+
+@pytest.mark.parametrize(("override", "message"), [
+    ("algo.learnin_rate=1", "has no field 'learnin_rate'"),
+    ("trian.seed=1", "must start with one of"),
+    ("train.seed", "not of the form"),
+    ("train.total_env_steps=2.5", "expected an integer"),
+    ("algo.learn_alpha=maybe", "expected true or false"),
+    ("train.pool_refresh=1000", "pool_refresh"),
+])
+def test_bad_overrides_fail_in_one_line(override, message):
+    with pytest.raises(ValueError, match=message) as error:
+        apply_overrides(preset_config("sac"), [override])
+    assert "\n" not in str(error.value)
+
+
+def test_switching_algorithm_resets_its_config():
+    config = apply_overrides(preset_config("sac"), ["algo=ppo", "algo.num_epochs=2"])
+    assert isinstance(config.algo_config, PPOConfig) and config.algo_config.num_epochs == 2
+
+
+@pytest.mark.parametrize("name", ["sac-lq", "paper-ppo-mtr", "bc-none-safety", "bc_sac-lqh-behavior"])
+def test_config_round_trips_through_json(name):
+    config = apply_overrides(preset_config(name), ["reward.weights=speed:0.1", "obs.noise.occlusion=true"])
+    assert config_from_dict(config_to_dict(config)) == config

@@ -1,0 +1,81 @@
+"""LearningEnv on hand-made roads: termination vs truncation, rewards, auto-reset order, no recompiles."""
+
+from __future__ import annotations
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from tests.integration_sim.conftest import braking_scenario, cruising_scenario, small_data_config
+from vmax_sim.data import scenarios_to_batch
+from vmax_sim.env import EnvConfig
+from vmax_sim.env.learning import LearningEnv
+
+ENV = LearningEnv(EnvConfig(max_num_objects=8))
+
+
+def pool():
+    scenarios = [cruising_scenario("cruise"), braking_scenario("brake"), cruising_scenario("slow", 8.0)]
+    return scenarios_to_batch(scenarios, small_data_config(""))
+
+
+def run(policy, steps: int, batch_size: int = 2):
+    """Steps `batch_size` episodes with policy(state) -> (B, A); returns the stacked StepOutputs."""
+    scenarios = pool()
+    state = ENV.reset(scenarios, batch_size, jax.random.PRNGKey(0))
+
+    @jax.jit
+    def roll(state):
+        def body(state, _):
+            state, out = ENV.step(state, policy(state), scenarios)
+            return state, (out, state.sim.object_metadata.ids[:, 1])
+        return jax.lax.scan(body, state, None, length=steps)
+
+    return roll(state)[1]
+
+
+def test_expert_episode_truncates_with_positive_return_and_keeps_its_last_observation():
+    out, _ = run(ENV.expert_action, 80)
+    assert not bool(jnp.any(out.terminated))
+    assert out.truncated[:-1].sum() == 0 and bool(jnp.all(out.truncated[-1]))  # time limit after 80 steps
+    # navigation reward: +0.2 for every step that progressed along the route (cruise always does)
+    assert float(out.episode_return[-1, 0]) == pytest.approx(float(jnp.sum(out.reward[:, 0])), abs=1e-4)
+    assert float(out.episode_return[-1, 0]) > 0.2 * 75
+    assert float(out.episode_flags["overlap"][-1].sum()) == 0.0
+    # next_observation of the last step is the end of the episode, not the reset scene
+    assert not np.allclose(out.next_observation.sdc[-1, 1], out.observation.sdc[0, 1])  # braked to a stop
+
+
+def test_collision_terminates_with_the_safety_penalty():
+    # keep 10 m/s: the SDC of the braking scenario (episode 1) hits the stopped car
+    out, _ = run(lambda state: jnp.zeros((2, 2)) + ENV.core.dynamics.normalize(jnp.zeros(2)), 60)
+    hit = np.flatnonzero(np.asarray(out.terminated[:, 1]))
+    assert hit.size >= 1
+    step = hit[0]
+    assert float(out.reward[step, 1]) <= -1.0 + 0.2 + 1e-6  # collision -1 (progress may still add 0.2)
+    assert bool(out.episode_flags["overlap"][step, 1]) and not bool(out.truncated[step, 1])
+    assert not bool(jnp.any(out.terminated[:, 0]))  # the cruise episode keeps going
+
+
+def test_finished_episodes_restart_on_the_next_pool_scenarios():
+    out, second_object_ids = run(ENV.expert_action, 81, batch_size=2)
+    # episodes 0, 1 run scenarios 0, 1 of the pool; after 80 steps both restart on scenarios 2 then 0
+    before, after = np.asarray(second_object_ids[0]), np.asarray(second_object_ids[-1])
+    pool_ids = np.asarray(pool().object_metadata.ids[:, 1])
+    np.testing.assert_array_equal(before, pool_ids[[0, 1]])
+    np.testing.assert_array_equal(after, pool_ids[[2, 0]])
+
+
+def test_step_compiles_once():
+    scenarios = pool()
+    state = ENV.reset(scenarios, 2, jax.random.PRNGKey(0))
+
+    @jax.jit
+    @chex.assert_max_traces(n=1)
+    def step(state, action):
+        return ENV.step(state, action, scenarios)
+
+    for _ in range(3):
+        state, _ = step(state, jnp.zeros((2, 2)))

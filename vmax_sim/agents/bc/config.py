@@ -1,0 +1,53 @@
+"""Behaviour cloning settings (frozen) and named presets.
+
+"paper": lr 1e-4, batch 64 and the released V-Max BC configuration's 8 gradient updates per env step
+with 80-step unrolls (the paper's table was not available to check the count against; see
+docs/agents.md); MLP 256-64-32. "default" keeps a 50k-transition buffer (the log is replayed, recent data suffice). "debug" is tiny and fast.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from vmax_sim.agents.common import check_positive, preset
+
+
+@dataclasses.dataclass(frozen=True)
+class BCConfig:
+    # learning
+    learning_rate: float = 1e-4
+    max_grad_norm: float | None = None
+    nll_weight: float = 1.0  # weight of -log pi(expert_action | s)
+    mse_weight: float = 0.0  # weight of |tanh(loc) - expert_action|^2 (optional anchor of the mode)
+    expert_action_eps: float = 1e-3  # expert actions clipped to [-1 + eps, 1 - eps] before atanh
+    # network
+    policy_hidden_sizes: tuple[int, ...] = (256, 64, 32)
+    activation: str = "relu"
+    log_std_min: float = -5.0
+    log_std_max: float = 2.0
+    # training loop (read by vmax_sim.training, not by the learner)
+    num_envs: int = 16
+    batch_size: int = 64
+    updates_per_step: int = 8  # gradient updates per collection round
+    unroll_length: int = 80  # env steps collected per round
+    buffer_size: int = 1_000_000
+
+    def __post_init__(self):
+        check_positive(self, "learning_rate", "num_envs", "batch_size", "updates_per_step", "unroll_length",
+                       "buffer_size", "expert_action_eps")
+        if self.nll_weight < 0 or self.mse_weight < 0 or self.nll_weight + self.mse_weight == 0:
+            raise ValueError("nll_weight and mse_weight must be >= 0 and not both 0")
+
+
+PAPER = BCConfig()
+PRESETS: dict[str, BCConfig] = {
+    "paper": PAPER,
+    "default": dataclasses.replace(PAPER, buffer_size=50_000),  # ~450 MiB of float16 observations
+    "debug": dataclasses.replace(PAPER, learning_rate=1e-3, policy_hidden_sizes=(64, 64), num_envs=4,
+                                 batch_size=32, updates_per_step=1, unroll_length=8, buffer_size=10_000),
+}
+
+
+def get_config(name: str = "default", **overrides: Any) -> BCConfig:
+    return preset(PRESETS, name, **overrides)

@@ -1,0 +1,50 @@
+"""Behaviour cloning learner: `make_learner(config, encoder_factory, action_dim) -> Learner`.
+
+One `update` is one Adam step on `bc_loss` over a batch of Transitions (obs, expert_action used).
+"""
+
+from __future__ import annotations
+
+import flax.struct
+import jax
+import jax.numpy as jnp
+import optax
+
+from vmax_sim.agents.bc.config import BCConfig
+from vmax_sim.agents.bc.losses import bc_loss
+from vmax_sim.agents.bc.networks import make_networks
+from vmax_sim.agents.common import apply_gradients, global_norm, make_optimizer, scalar
+from vmax_sim.agents.networks import EncoderFactory
+from vmax_sim.agents.policy import make_act_fns
+from vmax_sim.agents.types import Learner, Metrics, Params, Transition
+
+
+@flax.struct.dataclass
+class BCTrainState:
+    policy_params: Params
+    opt_state: optax.OptState
+    step: jax.Array  # () int32, updates done
+
+
+def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: int) -> Learner:
+    actor = make_networks(config, encoder_factory, action_dim)
+    optimizer = make_optimizer(config.learning_rate, config.max_grad_norm)
+
+    def init(key: jax.Array, obs_example) -> BCTrainState:
+        params = actor.init(key, obs_example)
+        return BCTrainState(policy_params=params, opt_state=optimizer.init(params), step=jnp.zeros((), jnp.int32))
+
+    def loss_fn(params: Params, batch: Transition):
+        return bc_loss(actor.apply(params, batch.obs), batch.expert_action, config.nll_weight, config.mse_weight,
+                       config.expert_action_eps)
+
+    def update(state: BCTrainState, batch: Transition, key: jax.Array) -> tuple[BCTrainState, Metrics]:
+        del key  # the loss is deterministic
+        (_, metrics), grads = jax.value_and_grad(loss_fn, has_aux=True)(state.policy_params, batch)
+        params, opt_state = apply_gradients(optimizer, grads, state.opt_state, state.policy_params)
+        metrics = {**metrics, "grad_norm": scalar(global_norm(grads))}
+        return BCTrainState(policy_params=params, opt_state=opt_state, step=state.step + 1), metrics
+
+    act, act_with_info = make_act_fns(actor.apply)
+    return Learner(init=init, update=update, act=act, policy_params=lambda state: state.policy_params,
+                   act_with_info=act_with_info, value=None)

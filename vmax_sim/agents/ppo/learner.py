@@ -1,0 +1,108 @@
+"""PPO learner: `make_learner(config, encoder_factory, action_dim) -> Learner`.
+
+`update(state, rollout, key, bootstrap_value=None)` takes a rollout Transition with leading (T, B) dims
+collected with the current policy (its log_prob and value fields filled by `act_with_info`), computes
+GAE once with the behaviour values, then runs `num_epochs` epochs of `num_minibatches` shuffled
+minibatch steps, all inside one `lax.scan` over epochs of a `lax.scan` over minibatches.
+"""
+
+from __future__ import annotations
+
+import flax.struct
+import jax
+import jax.numpy as jnp
+import optax
+
+from vmax_sim.agents.common import apply_gradients, global_norm, make_optimizer, scalar
+from vmax_sim.agents.networks import EncoderFactory
+from vmax_sim.agents.policy import make_act_fns
+from vmax_sim.agents.ppo import losses as ppo_losses
+from vmax_sim.agents.ppo.config import PPOConfig
+from vmax_sim.agents.ppo.networks import PPOParams, make_networks
+from vmax_sim.agents.types import Learner, Metrics, Transition
+
+
+@flax.struct.dataclass
+class PPOTrainState:
+    params: PPOParams
+    opt_state: optax.OptState
+    step: jax.Array  # () int32, updates (rollouts) done
+
+
+def _flatten_time(tree):
+    """(T, B, ...) -> (T * B, ...) leaf by leaf."""
+    return jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), tree)
+
+
+def make_learner(config: PPOConfig, encoder_factory: EncoderFactory, action_dim: int) -> Learner:
+    networks = make_networks(config, encoder_factory, action_dim)
+    loss_fn = ppo_losses.make_loss(networks, config)
+    optimizer = make_optimizer(config.learning_rate, config.max_grad_norm)
+
+    def init(key: jax.Array, obs_example) -> PPOTrainState:
+        policy_key, value_key = jax.random.split(key)
+        params = PPOParams(policy=networks.policy.init(policy_key, obs_example),
+                           value=networks.value.init(value_key, obs_example))
+        return PPOTrainState(params=params, opt_state=optimizer.init(params), step=jnp.zeros((), jnp.int32))
+
+    def value(params: PPOParams, obs) -> jax.Array:
+        return networks.value.apply(params.value, obs)
+
+    def advantages_and_returns(params: PPOParams, rollout: Transition, bootstrap_value):
+        """GAE (T, B) with the behaviour values; V(next_obs) is evaluated only when a step was truncated."""
+        num_steps, num_envs = rollout.reward.shape
+        if bootstrap_value is None:
+            bootstrap_value = value(params, jax.tree.map(lambda x: x[-1], rollout.next_obs))
+        truncation_values = jax.lax.cond(
+            jnp.any(jnp.asarray(rollout.truncated, bool)),
+            lambda: value(params, _flatten_time(rollout.next_obs)).reshape(num_steps, num_envs),
+            lambda: jnp.zeros((num_steps, num_envs), jnp.float32))
+        next_values = ppo_losses.next_values_with_truncation(rollout.value, bootstrap_value, rollout.truncated,
+                                                              truncation_values)
+        return ppo_losses.compute_gae(config.reward_scale * rollout.reward, rollout.value, next_values,
+                                      rollout.discount, rollout.done, config.gamma, config.gae_lambda)
+
+    def sgd_step(carry, minibatch):
+        params, opt_state = carry
+        batch, key = minibatch
+        (_, metrics), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, key)
+        params, opt_state = apply_gradients(optimizer, grads, opt_state, params)
+        return (params, opt_state), {**metrics, "grad_norm": scalar(global_norm(grads))}
+
+    def update(state: PPOTrainState, rollout: Transition, key: jax.Array,
+               bootstrap_value: jax.Array | None = None) -> tuple[PPOTrainState, Metrics]:
+        num_steps, num_envs = rollout.reward.shape
+        num_samples = num_steps * num_envs
+        if num_samples % config.num_minibatches:
+            raise ValueError(f"a rollout of T * B = {num_steps} * {num_envs} transitions does not split into "
+                             f"{config.num_minibatches} minibatches")
+        minibatch_size = num_samples // config.num_minibatches
+        advantages, returns = advantages_and_returns(state.params, rollout, bootstrap_value)
+        data = ppo_losses.PPOBatch(obs=_flatten_time(rollout.obs), action=_flatten_time(rollout.action),
+                                   log_prob=rollout.log_prob.reshape(-1), value=rollout.value.reshape(-1),
+                                   advantage=advantages.reshape(-1), target=returns.reshape(-1))
+
+        def epoch(carry, epoch_key):
+            perm_key, loss_key = jax.random.split(epoch_key)
+            order = jax.random.permutation(perm_key, num_samples)
+            shuffled = jax.tree.map(
+                lambda x: x[order].reshape((config.num_minibatches, minibatch_size) + x.shape[1:]), data)
+            keys = jax.random.split(loss_key, config.num_minibatches)
+            return jax.lax.scan(sgd_step, carry, (shuffled, keys))
+
+        (params, opt_state), metrics = jax.lax.scan(epoch, (state.params, state.opt_state),
+                                                    jax.random.split(key, config.num_epochs))
+        metrics = jax.tree.map(jnp.mean, metrics)  # over epochs and minibatches
+        residual_var = jnp.var(returns - rollout.value)
+        metrics.update(advantage_mean=scalar(jnp.mean(advantages)), return_mean=scalar(jnp.mean(returns)),
+                       explained_variance=scalar(1.0 - residual_var / (jnp.var(returns) + 1e-8)))
+        return PPOTrainState(params=params, opt_state=opt_state, step=state.step + 1), metrics
+
+    act, policy_act_with_info = make_act_fns(lambda params, obs: networks.policy.apply(params.policy, obs))
+
+    def act_with_info(params: PPOParams, obs, key: jax.Array, deterministic=False):
+        action, info = policy_act_with_info(params, obs, key, deterministic)
+        return action, {**info, "value": value(params, obs)}
+
+    return Learner(init=init, update=update, act=act, policy_params=lambda state: state.params,
+                   act_with_info=act_with_info, value=value)

@@ -1,0 +1,207 @@
+"""`LearningEnv`: the one place a training loop gets reset / step / observe / reward, over a batch.
+
+The SDC is driven by the policy (actions in [-1, 1], mapped onto the dynamics' bounds), every other
+object replays the log. Each step computes the metrics once and derives from them the reward, the
+termination (collision / off-road / red light, as `EnvConfig.terminate_on`), the truncation (episode
+length or end of the log) and the next observation, which reuses the metrics' candidate objects and
+path projection. Finished episodes restart on the next scenario of a device-side pool (auto-reset);
+the transition of the finishing step keeps the true last observation, so a time-limit truncation
+can be bootstrapped while a crash is not.
+
+Everything is pure and jittable; `reset` and `step` take the pool as an argument so the host can
+swap fresh scenarios into it between jitted chunks.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from vmax_sim.datatypes import SimulatorState
+from vmax_sim.env.config import EnvConfig
+from vmax_sim.env.environment import Environment
+from vmax_sim.env.metrics_adapter import reference_arcs, sdc_observation, step_inputs
+from vmax_sim.evaluation.policies import sdc_action
+from vmax_sim.metrics import MetricsConfig, SharedQueries, shared_queries, step_metrics
+from vmax_sim.observation import Observation, ObservationConfig
+from vmax_sim.rewards import RewardConfig, check_reward_config, compute_reward
+
+# Termination names of EnvConfig.terminate_on -> the step metric that decides them (same rules as
+# vmax_sim.env.metrics_adapter.termination_fns, read from the metrics the step computed anyway).
+TERMINATION_METRICS = {"collision": "overlap", "offroad": "offroad", "red_light": "red_light"}
+# Per-episode indicators reported when an episode ends (any step of the episode).
+EPISODE_FLAGS = ("overlap", "offroad", "red_light", "off_route", "wrong_way", "at_fault_collision")
+
+
+@struct.dataclass
+class LearningState:
+    sim: SimulatorState  # (B, ...) the running episodes
+    arcs: jax.Array  # (B, P, 2) float32, logged start / end arcs along the SDC paths (`reference_arcs`)
+    shared: SharedQueries  # (B, ...) this step's candidate objects and path projection
+    metrics: dict  # name -> (B,) float32, `step_metrics` of the current step (the progress term compares)
+    observation: Observation  # (B, ...) the policy's input now
+    episode_return: jax.Array  # (B,) float32, reward summed since the episode started
+    episode_length: jax.Array  # (B,) int32, policy steps since the episode started
+    episode_flags: dict  # name -> (B,) bool, EPISODE_FLAGS seen so far in the episode
+    next_scenario: jax.Array  # () int32, pool index of the next episode to start
+    key: jax.Array  # PRNG key for observation noise
+
+
+@struct.dataclass
+class StepOutput:
+    """One batched step of experience (the learner's Transition is built from it)."""
+
+    observation: Observation  # (B, ...) before the step
+    action: jax.Array  # (B, A) float32 in [-1, 1], what was applied
+    expert_action: jax.Array  # (B, A) float32 in [-1, 1], the log-following action at the same state
+    reward: jax.Array  # (B,) float32
+    terminated: jax.Array  # (B,) bool, collision / off-road / red light ended the episode
+    truncated: jax.Array  # (B,) bool, time limit or end of log (and not terminated)
+    next_observation: Observation  # (B, ...) after the step, before any reset (the true last one)
+    episode_return: jax.Array  # (B,) float32, the finished episode's return where done, else 0
+    episode_length: jax.Array  # (B,) int32, likewise
+    episode_flags: dict  # name -> (B,) bool, likewise (EPISODE_FLAGS)
+    episode_progress: jax.Array  # (B,) float32, progress ratio at the end of finished episodes
+
+    @property
+    def done(self) -> jax.Array:
+        return self.terminated | self.truncated
+
+
+@dataclasses.dataclass(frozen=True)
+class LearningEnv:
+    """Batched learning environment over SDC-controlled episodes (see the module docstring)."""
+
+    env_config: EnvConfig = EnvConfig()
+    obs_config: ObservationConfig = ObservationConfig()
+    reward_config: RewardConfig = RewardConfig()
+    metrics_config: MetricsConfig = MetricsConfig()
+
+    def __post_init__(self) -> None:
+        if self.env_config.controlled != "sdc":
+            raise ValueError("LearningEnv drives the SDC only: EnvConfig.controlled must be 'sdc'")
+        unknown = set(self.env_config.terminate_on) - set(TERMINATION_METRICS)
+        if unknown:
+            raise ValueError(f"EnvConfig.terminate_on: unknown {sorted(unknown)}; choose among "
+                             f"{sorted(TERMINATION_METRICS)}")
+        check_reward_config(self.reward_config)
+        config = dataclasses.replace(self.env_config, normalize_actions=True)  # policies act in [-1, 1]
+        object.__setattr__(self, "env_config", config)
+
+    @property
+    def core(self) -> Environment:
+        return Environment(self.env_config)
+
+    @property
+    def action_dim(self) -> int:
+        return self.core.action_dim
+
+    # ------------------------------------------------------------------ one scene (vmapped below)
+
+    def _start(self, sim: SimulatorState):
+        """Reset one scene: state, arcs, shared queries, metrics, observation."""
+        sim = self.core.reset(sim)
+        arcs = reference_arcs(sim, self.env_config)
+        inputs = step_inputs(sim, arcs)
+        shared = shared_queries(inputs, self.metrics_config)
+        metrics = step_metrics(sim.map_index, inputs, self.metrics_config, shared)
+        return sim, arcs, shared, metrics, sdc_observation(sim, shared, self.obs_config)
+
+    def _expert(self, sim: SimulatorState) -> jax.Array:
+        """The SDC's log-following action in [-1, 1]. (A,)"""
+        action = self.core.expert_action(sim)
+        sdc = jnp.argmax(sim.object_metadata.is_sdc)
+        return jnp.clip(action.data[sdc], -1.0, 1.0)
+
+    def _advance(self, sim: SimulatorState, arcs: jax.Array, action: jax.Array, key: jax.Array):
+        """Step one scene with the SDC's action (A,); metrics, termination, truncation, next observation."""
+        sim = self.core.step(sim, sdc_action(sim, action))
+        inputs = step_inputs(sim, arcs)
+        shared = shared_queries(inputs, self.metrics_config)
+        metrics = step_metrics(sim.map_index, inputs, self.metrics_config, shared)
+        terminated = jnp.zeros((), bool)
+        for name in self.env_config.terminate_on:
+            terminated = terminated | (metrics[TERMINATION_METRICS[name]] > 0.5)
+        truncated = self.core.is_truncated(sim) & ~terminated
+        noise_key = key if _has_noise(self.obs_config) else None
+        observation = sdc_observation(sim, shared, self.obs_config, noise_key)
+        return sim, shared, metrics, terminated, truncated, observation
+
+    # ------------------------------------------------------------------ batched API
+
+    def reset(self, pool: SimulatorState, batch_size: int, key: jax.Array) -> LearningState:
+        """Starts `batch_size` episodes on pool scenarios 0..B-1 (cycled when the pool is smaller)."""
+        pool_size = pool.timestep.shape[0]
+        indices = jnp.arange(batch_size) % pool_size
+        sim, arcs, shared, metrics, observation = jax.vmap(self._start)(_take(pool, indices))
+        zeros = jnp.zeros(batch_size)
+        return LearningState(
+            sim=sim, arcs=arcs, shared=shared, metrics=metrics, observation=observation,
+            episode_return=zeros, episode_length=jnp.zeros(batch_size, jnp.int32),
+            episode_flags={name: jnp.zeros(batch_size, bool) for name in EPISODE_FLAGS},
+            next_scenario=jnp.asarray(batch_size % pool_size, jnp.int32), key=key)
+
+    def expert_action(self, state: LearningState) -> jax.Array:
+        """The log-following SDC action of every running episode. (B, A) in [-1, 1]"""
+        return jax.vmap(self._expert)(state.sim)
+
+    def step(self, state: LearningState, action: jax.Array, pool: SimulatorState) -> tuple[LearningState, StepOutput]:
+        """Applies action (B, A) in [-1, 1]; finished episodes restart on the next pool scenarios."""
+        batch_size = action.shape[0]
+        action = jnp.clip(action, -1.0, 1.0)
+        expert = self.expert_action(state)
+        key, step_key = jax.random.split(state.key)
+        sim, shared, metrics, terminated, truncated, next_obs = jax.vmap(self._advance)(
+            state.sim, state.arcs, action, jax.random.split(step_key, batch_size))
+        reward = compute_reward(metrics, state.metrics, self.reward_config, self.metrics_config)
+        done = terminated | truncated
+        episode_return = state.episode_return + reward
+        episode_length = state.episode_length + 1
+        flags = {name: state.episode_flags[name] | (metrics[name] > 0.5) for name in EPISODE_FLAGS}
+        output = StepOutput(
+            observation=state.observation, action=action, expert_action=expert, reward=reward,
+            terminated=terminated, truncated=truncated, next_observation=next_obs,
+            episode_return=jnp.where(done, episode_return, 0.0),
+            episode_length=jnp.where(done, episode_length, 0),
+            episode_flags={name: flag & done for name, flag in flags.items()},
+            episode_progress=jnp.where(done, metrics["progress_ratio"], 0.0))
+
+        running = LearningState(
+            sim=sim, arcs=state.arcs, shared=shared, metrics=metrics, observation=next_obs,
+            episode_return=jnp.where(done, 0.0, episode_return),
+            episode_length=jnp.where(done, 0, episode_length),
+            episode_flags={name: flag & ~done for name, flag in flags.items()},
+            next_scenario=state.next_scenario, key=key)
+        pool_size = pool.timestep.shape[0]
+
+        def restart(current: LearningState) -> LearningState:
+            # the k-th finished episode takes the k-th next scenario of the pool
+            indices = (current.next_scenario + jnp.cumsum(done) - 1) % pool_size
+            fresh_sim, fresh_arcs, fresh_shared, fresh_metrics, fresh_obs = jax.vmap(self._start)(_take(pool, indices))
+            fresh = (fresh_sim, fresh_arcs, fresh_shared, fresh_metrics, fresh_obs)
+            kept = (current.sim, current.arcs, current.shared, current.metrics, current.observation)
+            sim, arcs, shared, metrics, observation = jax.tree.map(
+                lambda f, c: jnp.where(_row_mask(done, c), f, c), fresh, kept)
+            return current.replace(
+                sim=sim, arcs=arcs, shared=shared, metrics=metrics, observation=observation,
+                next_scenario=((current.next_scenario + jnp.sum(done)) % pool_size).astype(jnp.int32))
+
+        new_state = jax.lax.cond(jnp.any(done), restart, lambda current: current, running)
+        return new_state, output
+
+
+def _has_noise(config: ObservationConfig) -> bool:
+    noise = config.noise
+    return noise.position_std > 0 or noise.dropout_max_prob > 0 or noise.occlusion
+
+
+def _take(pool: SimulatorState, indices: jax.Array) -> SimulatorState:
+    return jax.tree.map(lambda a: a[indices], pool)
+
+
+def _row_mask(rows: jax.Array, like: jax.Array) -> jax.Array:
+    """rows (B,) broadcast against an array with leading axis B."""
+    return rows.reshape(rows.shape + (1,) * (like.ndim - 1))

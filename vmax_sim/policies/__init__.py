@@ -1,0 +1,17 @@
+"""Rule-based driving policies: IDM + pure pursuit, PDM-Closed, and uniform random actions.
+
+Each `*_policy(env, config)` returns an evaluation `Policy` whose action_fn drives the SDC of one
+unbatched state (the rollout vmaps it); `idm_action` / `pdm_action` are the pure planners.
+"""
+
+from vmax_sim.policies.idm import IDMConfig, idm_acceleration, idm_action, idm_policy, pure_pursuit_curvature
+from vmax_sim.policies.random import random_policy
+
+__all__ = [
+    "IDMConfig",
+    "idm_acceleration",
+    "idm_action",
+    "idm_policy",
+    "pure_pursuit_curvature",
+    "random_policy",
+]

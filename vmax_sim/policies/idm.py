@@ -1,0 +1,183 @@
+"""Intelligent Driver Model along the SDC's route path, with pure-pursuit steering.
+
+Longitudinal (Treiber, Hennecke & Helbing 2000):
+    a_idm = a [1 - (v / v0)^delta - (s* / s)^2],   s* = s0 + max(0, v T + v (v - v_lead) / (2 sqrt(a b)))
+with v0 the desired speed (the lane's speed limit, lowered ahead of bends), s the bumper-to-bumper
+gap to the leader along the path and v_lead its speed along the path. The leader is the nearest
+object ahead whose box reaches into the lane corridor around the path, or the stop point of a red
+(or stoppable yellow) light on the route. Lateral: pure pursuit (Coulter 1992) on a point of the
+path a speed-dependent distance ahead, curvature = 2 y / d^2 in the SDC's frame.
+
+Everything works on one unbatched state and is jittable; the rollout vmaps it over scenarios.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+
+from scenariomax.schema import TL_ARROW_CAUTION, TL_ARROW_STOP, TL_CAUTION, TL_FLASHING_STOP, TL_STOP
+from vmax_sim.datatypes import Action, SimulatorState
+from vmax_sim.dynamics.bicycle import ACCEL_BOUNDS, CURVATURE_BOUNDS, DT
+from vmax_sim.evaluation.policies import Policy, sdc_action
+from vmax_sim.geometry.transforms import to_local_points
+from vmax_sim.policies.route import (
+    Ego,
+    Objects,
+    RoutePath,
+    allowed_speed,
+    allowed_speed_profile,
+    choose_route,
+    current_lane_id,
+    ego_now,
+    lane_speed_limit,
+    light_stop_arc,
+    objects_now,
+    point_at,
+    project,
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class IDMConfig:
+    """IDM and pure-pursuit parameters (defaults: the textbook IDM values for city traffic)."""
+
+    default_speed: float = 13.4  # m/s (30 mph) desired speed where the lane's limit is unknown
+    speed_factor: float = 1.0  # desired speed = factor x speed limit
+    max_accel: float = 1.5  # a, m/s^2
+    comfort_decel: float = 2.0  # b, m/s^2
+    time_headway: float = 1.5  # T, s
+    min_gap: float = 2.0  # s0, m (also kept before a red light's stop point)
+    delta: float = 4.0  # acceleration exponent
+    max_decel: float = 6.0  # m/s^2, the hardest braking (the bicycle model's bound)
+    lane_half_width: float = 1.75  # m; an object is in the corridor when |lateral| < this + its half width
+    bend_lateral_accel: float = 2.0  # m/s^2 accepted in bends: v <= sqrt(this / curvature)
+    bend_decel: float = 1.5  # m/s^2 used to slow down ahead of a bend
+    caution_decel: float = 3.0  # m/s^2; stop at a yellow light only when braking this hard suffices
+    stop_states: tuple[int, ...] = (TL_ARROW_STOP, TL_STOP, TL_FLASHING_STOP)  # the red-light metric's states
+    caution_states: tuple[int, ...] = (TL_ARROW_CAUTION, TL_CAUTION)
+    light_lateral: float = 2.5  # m, a stop point this close to the path is on it
+    lane_match_distance: float = 3.0  # m, lanes further away give no speed limit / light
+    lookahead_min: float = 4.0  # m, pure-pursuit lookahead at standstill
+    lookahead_time: float = 0.6  # s, lookahead grows by speed x this
+    lookahead_max: float = 25.0  # m
+    dt: float = DT  # s, used only to stop at zero speed instead of reversing
+
+    def __post_init__(self):
+        for name in ("max_accel", "comfort_decel", "time_headway", "delta", "max_decel", "bend_lateral_accel",
+                     "bend_decel", "lookahead_min", "dt"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"IDMConfig.{name} must be positive, got {getattr(self, name)}")
+        if self.lookahead_max < self.lookahead_min:
+            raise ValueError("IDMConfig.lookahead_max must be at least lookahead_min")
+
+
+def idm_acceleration(speed: jax.Array, desired_speed: jax.Array, gap: jax.Array, lead_speed: jax.Array,
+                     config: IDMConfig) -> jax.Array:
+    """IDM acceleration (not clipped). All arguments broadcast: (...) -> (...); gap inf = free road."""
+    v = jnp.maximum(speed, 0.0)
+    v0 = jnp.maximum(desired_speed, 0.1)
+    free = 1.0 - (v / v0) ** config.delta
+    dynamic = v * config.time_headway + v * (v - lead_speed) / (2.0 * jnp.sqrt(config.max_accel * config.comfort_decel))
+    desired_gap = config.min_gap + jnp.maximum(dynamic, 0.0)
+    interaction = jnp.where(jnp.isfinite(gap), (desired_gap / jnp.maximum(gap, 0.1)) ** 2, 0.0)
+    return config.max_accel * (free - interaction)
+
+
+def bounded_acceleration(accel: jax.Array, speed: jax.Array, config: IDMConfig) -> jax.Array:
+    """Clip to [-max_decel, max_accel] and never brake below zero speed within one step. (...) -> (...)."""
+    accel = jnp.clip(accel, -config.max_decel, config.max_accel)
+    accel = jnp.maximum(accel, -jnp.maximum(speed, 0.0) / config.dt)  # brake at most down to zero speed
+    accel = jnp.where(speed < 0.0, -speed / config.dt, accel)  # reversing (never planned): back to zero
+    return jnp.clip(accel, *ACCEL_BOUNDS)
+
+
+def corridor_leader(objects: Objects, ego_arc: jax.Array, ego_offset: jax.Array, ego_half_length: jax.Array,
+                    lane_half_width: float) -> tuple[jax.Array, jax.Array]:
+    """Gap (bumper to bumper, along the path) and speed of the nearest object ahead in the corridor
+    around the path shifted `ego_offset` to the left. -> (), () (inf, 0 when there is none)."""
+    in_corridor = objects.valid & (jnp.abs(objects.lateral - ego_offset) < lane_half_width + objects.half_across)
+    ahead = objects.arc > ego_arc
+    gap = jnp.where(in_corridor & ahead, objects.arc - ego_arc - ego_half_length - objects.half_along, jnp.inf)
+    k = jnp.argmin(gap)
+    return gap[k], jnp.where(jnp.isfinite(gap[k]), jnp.maximum(objects.speed_along[k], 0.0), 0.0)
+
+
+def pure_pursuit_curvature(xy: jax.Array, yaw: jax.Array, target_xy: jax.Array) -> jax.Array:
+    """Curvature of the arc from the pose (xy (2,), yaw ()) through target_xy (2,): 2 y / d^2. -> ()."""
+    local = to_local_points(target_xy, xy, yaw)
+    return 2.0 * local[1] / jnp.maximum(jnp.sum(local * local), 1e-2)
+
+
+def lookahead_distance(speed: jax.Array, config: IDMConfig) -> jax.Array:
+    """(...) -> (...) metres."""
+    return jnp.clip(config.lookahead_min + config.lookahead_time * jnp.abs(speed), config.lookahead_min,
+                    config.lookahead_max)
+
+
+def steer(path: RoutePath, ego: Ego, ego_arc: jax.Array, offset: jax.Array, config: IDMConfig) -> jax.Array:
+    """Pure-pursuit curvature towards the path shifted `offset` to the left, clipped to the model's bounds. ()"""
+    target, _ = point_at(path, ego_arc + lookahead_distance(ego.speed, config), offset)
+    return jnp.clip(pure_pursuit_curvature(ego.xy, ego.yaw, target), *CURVATURE_BOUNDS)
+
+
+def desired_speed(state: SimulatorState, path: RoutePath, ego: Ego, ego_arc: jax.Array,
+                  config: IDMConfig) -> tuple[jax.Array, jax.Array]:
+    """The speed limit (default when unknown) times speed_factor, and the bend-speed profile of the path.
+
+    -> v0 () and the profile (M,) for `allowed_speed`.
+    """
+    limit = lane_speed_limit(state, ego.xy, ego.yaw, config.lane_match_distance)
+    v_limit = jnp.where(limit > 0.0, limit, config.default_speed) * config.speed_factor
+    profile = allowed_speed_profile(path, config.bend_lateral_accel, config.bend_decel)
+    return v_limit, profile
+
+
+def stop_gap(state: SimulatorState, path: RoutePath, ego: Ego, ego_arc: jax.Array, config: IDMConfig) -> jax.Array:
+    """Gap from the front bumper to the stop point of a light the SDC must stop at (inf if none). ()"""
+    own_lane = current_lane_id(state, ego.xy, ego.yaw, config.lane_match_distance)
+    stop_arc = light_stop_arc(state, path, ego, own_lane, config.stop_states, config.caution_states,
+                              config.caution_decel, config.light_lateral)
+    return stop_arc - ego_arc - 0.5 * ego.length
+
+
+def idm_action(state: SimulatorState, config: IDMConfig = IDMConfig()) -> jax.Array:
+    """The SDC's [acceleration m/s^2, curvature 1/m] under IDM + pure pursuit. One unbatched state -> (2,)."""
+    ego = ego_now(state)
+    path = choose_route(state, ego)
+    ego_arc = project(path, ego.xy[None])[0][0]
+    objects = objects_now(state, path)
+    gap, lead_speed = corridor_leader(objects, ego_arc, 0.0, 0.5 * ego.length, config.lane_half_width)
+    light_gap = stop_gap(state, path, ego, ego_arc, config)
+    v_limit, profile = desired_speed(state, path, ego, ego_arc, config)
+    v0 = jnp.minimum(v_limit, allowed_speed(path, profile, ego_arc, config.bend_decel))
+    accel = jnp.minimum(idm_acceleration(ego.speed, v0, gap, lead_speed, config),
+                        idm_acceleration(ego.speed, v0, light_gap, 0.0, config))
+    accel = bounded_acceleration(accel, ego.speed, config)
+    curvature = steer(path, ego, ego_arc, jnp.zeros(()), config)
+    return jnp.stack([accel, curvature]).astype(jnp.float32)
+
+
+def check_bicycle(env, name: str) -> None:
+    if env.dynamics.name != "bicycle":
+        raise ValueError(f"the {name} policy needs the bicycle dynamics, not {env.dynamics.name!r}")
+
+
+def as_env_action(env, state: SimulatorState, action: jax.Array) -> Action:
+    """The SDC's physical (2,) action in its slot of a full Action, in the env's convention."""
+    if env.config.normalize_actions:
+        action = env.dynamics.normalize(action)
+    return sdc_action(state, action)
+
+
+def idm_policy(env, config: IDMConfig | None = None) -> Policy:
+    """IDM + pure pursuit as an evaluation `Policy` (no parameters, no observation)."""
+    check_bicycle(env, "idm")
+    config = config or IDMConfig()
+
+    def action_fn(params, state, observation, key):
+        return as_env_action(env, state, idm_action(state, config))
+
+    return Policy("idm", action_fn)

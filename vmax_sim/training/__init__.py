@@ -1,0 +1,18 @@
+"""Training: the jitted loop (env steps + updates in one `lax.scan`), device replay buffer, scenario pool,
+Orbax checkpoints, CSV / TensorBoard logs, resume, data-parallel sharding, and `train`."""
+
+from vmax_sim.training.buffer import ReplayBuffer, buffer_add, buffer_init, buffer_sample, transition_bytes
+from vmax_sim.training.config import (
+    LoopConfig,
+    TrainConfig,
+    TrainDataConfig,
+    apply_overrides,
+    config_from_dict,
+    config_to_dict,
+    preset_config,
+)
+from vmax_sim.training.run import TrainResult, load_run_config, train
+
+__all__ = ["LoopConfig", "ReplayBuffer", "TrainConfig", "TrainDataConfig", "TrainResult", "apply_overrides",
+           "buffer_add", "buffer_init", "buffer_sample", "config_from_dict", "config_to_dict", "load_run_config",
+           "preset_config", "train", "transition_bytes"]

@@ -1,0 +1,258 @@
+"""`TrainConfig`: every setting of a training run as frozen dataclasses, named presets, `key=value` overrides.
+
+A preset name joins up to four words with dashes, in any order: an algorithm (sac, ppo, bc, bc_sac),
+an encoder (none, mlp, lq, lqh, mtr, wayformer), a reward preset (safety, navigation, behavior) and
+`paper` (the algorithm's hyper-parameters from the V-Max paper instead of this machine's defaults),
+e.g. `sac-lq-navigation` or `paper-sac-lq`. Overrides name a section and a field:
+`algo.learning_rate=3e-4 network.embed_dim=32 train.total_env_steps=50000 reward.preset=behavior`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import typing
+from collections.abc import Sequence
+from typing import Any
+
+from vmax_sim.agents import ALGORITHMS, get_config
+from vmax_sim.env.config import EnvConfig
+from vmax_sim.networks import ENCODER_NAMES, EncoderConfig
+from vmax_sim.observation import NoiseConfig, ObservationConfig
+from vmax_sim.rewards import REWARD_PRESETS, RewardConfig
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainDataConfig:
+    train: str = ""  # shard directory, file or glob; "" generates the embedded synthetic training split
+    eval: str = ""  # held-out shards for evaluation; "" generates the synthetic evaluation split
+    synthetic_train_scenarios: int = 400  # size of the embedded training split (seed synthetic_seed)
+    synthetic_eval_scenarios: int = 100  # size of the embedded evaluation split (seed synthetic_seed + 1)
+    synthetic_seed: int = 0
+    num_objects: int = 64
+    num_roadgraph_points: int = 30000
+    num_paths: int = 10
+    num_points_per_path: int = 300
+    max_num_lights: int = 16
+    shuffle_buffer: int = 256
+
+
+@dataclasses.dataclass(frozen=True)
+class LoopConfig:
+    total_env_steps: int = 200_000  # environment steps (summed over the parallel envs)
+    chunk_steps: int = 25  # batched env steps per jitted call (one progress / log row each)
+    pool_size: int = 64  # scenarios held on the device for auto-reset
+    pool_refresh: int = 4  # fresh scenarios swapped into the pool after every chunk
+    eval_every: int = 50_000  # env steps between evaluations on the held-out split (0: only at the end)
+    eval_scenarios: int = 100
+    eval_batch_size: int = 25
+    checkpoint_every: int = 20_000  # env steps between checkpoints (one is always written at the end)
+    keep_checkpoints: int = 2
+    save_buffer: bool = True  # the replay buffer travels in checkpoints (exact resume of off-policy runs)
+    buffer_dtype: str = "float16"  # storage of floating-point observation leaves in the replay buffer
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("total_env_steps", "chunk_steps", "pool_size", "eval_scenarios", "eval_batch_size",
+                     "checkpoint_every", "keep_checkpoints"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"train.{name} must be at least 1, got {getattr(self, name)}")
+        if self.pool_refresh < 0 or self.pool_refresh > self.pool_size:
+            raise ValueError(f"train.pool_refresh must be in [0, pool_size={self.pool_size}], got {self.pool_refresh}")
+        if self.buffer_dtype not in ("float16", "bfloat16", "float32"):
+            raise ValueError(f"train.buffer_dtype must be float16, bfloat16 or float32, got {self.buffer_dtype!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    algo: str = "sac"
+    algo_preset: str = "default"
+    algo_config: Any = None  # the algorithm's frozen config (None: algo_preset of algo)
+    network: EncoderConfig = EncoderConfig(name="lq")
+    env: EnvConfig = EnvConfig()
+    obs: ObservationConfig = ObservationConfig()
+    reward: RewardConfig = RewardConfig()
+    data: TrainDataConfig = TrainDataConfig()
+    train: LoopConfig = LoopConfig()
+
+    def __post_init__(self) -> None:
+        if self.algo not in ALGORITHMS:
+            raise ValueError(f"unknown algorithm {self.algo!r}; choose among {', '.join(ALGORITHMS)}")
+        if self.algo_config is None:
+            object.__setattr__(self, "algo_config", get_config(self.algo, self.algo_preset))
+        if self.env.max_num_objects != self.data.num_objects:
+            object.__setattr__(self, "env", dataclasses.replace(self.env, max_num_objects=self.data.num_objects))
+
+
+SECTIONS = ("algo", "network", "env", "obs", "reward", "data", "train")
+_SECTION_FIELD = {"algo": "algo_config", "network": "network", "env": "env", "obs": "obs", "reward": "reward",
+                  "data": "data", "train": "train"}
+
+
+def preset_config(name: str = "sac") -> TrainConfig:
+    """The TrainConfig of a preset name such as `sac-lq-navigation` (see the module docstring)."""
+    algo, encoder, reward, algo_preset = "sac", None, "navigation", "default"
+    for word in (w for w in name.lower().split("-") if w):
+        if word in ALGORITHMS:
+            algo = word
+        elif word in ENCODER_NAMES:
+            encoder = word
+        elif word in REWARD_PRESETS:
+            reward = word
+        elif word in ("paper", "default", "debug"):
+            algo_preset = word
+        else:
+            raise ValueError(f"unknown preset word {word!r} in {name!r}; use algorithms {', '.join(ALGORITHMS)}, "
+                             f"encoders {', '.join(ENCODER_NAMES)}, rewards {', '.join(REWARD_PRESETS)}, or paper")
+    network = EncoderConfig(name=encoder or DEFAULT_ENCODER)
+    return TrainConfig(algo=algo, algo_preset=algo_preset, network=network, reward=RewardConfig(preset=reward))
+
+
+DEFAULT_ENCODER = "lq"
+
+
+# ----------------------------------------------------------------------------- overrides
+
+
+def _parse_scalar(text: str, kind: type | None):
+    text = text.strip()
+    if kind is bool:
+        lowered = text.lower()
+        if lowered in ("1", "true", "yes", "on"):
+            return True
+        if lowered in ("0", "false", "no", "off"):
+            return False
+        raise ValueError(f"expected true or false, got {text!r}")
+    if kind is int:  # 1e6 and 50_000 are fine, 2.5 is not
+        value = float(text.replace("_", ""))
+        if not value.is_integer():
+            raise ValueError(f"expected an integer, got {text!r}")
+        return int(value)
+    if kind is float:
+        return float(text)
+    if kind is str:
+        return text
+    for parse in (int, float):  # untyped (None default): the narrowest number, else the text
+        try:
+            return parse(text)
+        except ValueError:
+            pass
+    return None if text.lower() == "none" else text
+
+
+def _field_kind(cls, name: str, current) -> tuple[type | None, bool]:
+    """(element type, is_tuple) of a dataclass field, from its annotation, else from its current value."""
+    hints = typing.get_type_hints(cls)
+    hint = hints.get(name)
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin is tuple:
+        inner = args[0] if args else None
+        return (inner if isinstance(inner, type) else None), True
+    if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+        concrete = [a for a in args if a is not type(None)]
+        if len(concrete) == 1 and typing.get_origin(concrete[0]) is tuple:
+            inner = typing.get_args(concrete[0])
+            return (inner[0] if inner and isinstance(inner[0], type) else None), True
+        return (concrete[0] if len(concrete) == 1 and isinstance(concrete[0], type) else None), False
+    if isinstance(hint, type):
+        return hint, False
+    return (type(current) if current is not None else None), isinstance(current, tuple)
+
+
+def _parse_value(cls, name: str, current, text: str):
+    if text.strip().lower() == "none" and current is None:
+        return None
+    kind, is_tuple = _field_kind(cls, name, current)
+    if name == "weights":  # RewardConfig.weights: term:weight,term:weight
+        pairs = [part.split(":") for part in text.split(",") if part.strip()]
+        if any(len(pair) != 2 for pair in pairs):
+            raise ValueError(f"expected term:weight pairs separated by commas, got {text!r}")
+        return tuple((term.strip(), float(weight)) for term, weight in pairs)
+    if is_tuple:
+        return tuple(_parse_scalar(part, kind) for part in text.split(",") if part.strip())
+    if text.strip().lower() == "none":
+        return None
+    return _parse_scalar(text, kind)
+
+
+def _override_field(obj, path: list[str], text: str, full_key: str):
+    name = path[0]
+    fields = {f.name for f in dataclasses.fields(obj)}
+    if name not in fields:
+        raise ValueError(f"unknown setting {full_key!r}: {type(obj).__name__} has no field {name!r} "
+                         f"(fields: {', '.join(sorted(fields))})")
+    current = getattr(obj, name)
+    if len(path) > 1:
+        if not dataclasses.is_dataclass(current):
+            raise ValueError(f"unknown setting {full_key!r}: {name!r} has no sub-fields")
+        return dataclasses.replace(obj, **{name: _override_field(current, path[1:], text, full_key)})
+    try:
+        value = _parse_value(type(obj), name, current, text)
+    except ValueError as error:
+        raise ValueError(f"bad value for {full_key}: {error}") from None
+    return dataclasses.replace(obj, **{name: value})
+
+
+def apply_overrides(config: TrainConfig, overrides: Sequence[str]) -> TrainConfig:
+    """Applies `section.field=value` strings in order (one-line ValueError on a bad key or value)."""
+    for item in overrides:
+        if "=" not in item:
+            raise ValueError(f"override {item!r} is not of the form section.field=value")
+        key, text = item.split("=", 1)
+        parts = key.strip().split(".")
+        if key.strip() in ("algo", "algo_preset"):
+            fresh = TrainConfig(algo=text.strip() if key.strip() == "algo" else config.algo,
+                                algo_preset=text.strip() if key.strip() == "algo_preset" else config.algo_preset)
+            config = dataclasses.replace(config, algo=fresh.algo, algo_preset=fresh.algo_preset,
+                                         algo_config=fresh.algo_config)
+            continue
+        if len(parts) < 2 or parts[0] not in SECTIONS:
+            raise ValueError(f"override {item!r}: the key must start with one of {', '.join(SECTIONS)} "
+                             f"(e.g. algo.learning_rate=3e-4)")
+        attribute = _SECTION_FIELD[parts[0]]
+        try:
+            updated = _override_field(getattr(config, attribute), parts[1:], text, key.strip())
+        except (TypeError, ValueError) as error:
+            raise ValueError(str(error).splitlines()[0]) from None
+        config = dataclasses.replace(config, **{attribute: updated})
+    return config
+
+
+# ----------------------------------------------------------------------------- (de)serialisation
+
+
+def config_to_dict(config: TrainConfig) -> dict:
+    return json.loads(json.dumps(dataclasses.asdict(config)))
+
+
+def _from_dict(cls, values: dict):
+    kwargs = {}
+    hints = typing.get_type_hints(cls)
+    for field in dataclasses.fields(cls):
+        if field.name not in values:
+            continue
+        value = values[field.name]
+        hint = hints.get(field.name)
+        if dataclasses.is_dataclass(hint) and isinstance(value, dict):
+            value = _from_dict(hint, value)
+        elif isinstance(value, list):
+            value = tuple(tuple(v) if isinstance(v, list) else v for v in value)
+        kwargs[field.name] = value
+    return cls(**kwargs)
+
+
+def config_from_dict(values: dict) -> TrainConfig:
+    """Inverse of `config_to_dict` (the run directory's config.json)."""
+    algo = values["algo"]
+    algo_config = get_config(algo, "default")
+    algo_config = _from_dict(type(algo_config), values.get("algo_config") or {})
+    obs_values = dict(values.get("obs", {}))
+    noise = NoiseConfig(**obs_values.pop("noise", {}))
+    return TrainConfig(
+        algo=algo, algo_preset=values.get("algo_preset", "default"), algo_config=algo_config,
+        network=_from_dict(EncoderConfig, values.get("network", {})),
+        env=_from_dict(EnvConfig, values.get("env", {})),
+        obs=dataclasses.replace(_from_dict(ObservationConfig, obs_values), noise=noise),
+        reward=_from_dict(RewardConfig, values.get("reward", {})),
+        data=_from_dict(TrainDataConfig, values.get("data", {})),
+        train=_from_dict(LoopConfig, values.get("train", {})))

@@ -1,0 +1,112 @@
+"""The host side of auto-reset: a deterministic stream of converted scenarios feeding the device pool.
+
+Scenario n of the (seeded, shuffled, repeated) stream always lands in pool slot n % pool_size, so
+the pool after any number of chunks is a pure function of how many scenarios were consumed: a
+resumed run rebuilds it exactly by skipping (decoding only) to that point. A background thread
+converts scenarios (map index included) ahead of the learner; `take` blocks only if it is behind,
+and the time it waited is reported so a slow loader is visible in the logs.
+"""
+
+from __future__ import annotations
+
+import itertools
+import queue
+import threading
+import time
+from collections.abc import Iterator
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from vmax_sim.data import DataConfig
+from vmax_sim.data.convert import scenario_to_numpy_state, stack_states
+from vmax_sim.data.loader import iter_scenarios
+from vmax_sim.datatypes import SimulatorState
+
+_END = object()
+
+
+class ScenarioStream:
+    """Converted numpy states of `config`'s scenarios in stream order, from index `start` on."""
+
+    def __init__(self, config: DataConfig, start: int = 0, capacity: int = 32):
+        self.consumed = start  # stream index of the next state `take` returns
+        self.waited_s = 0.0  # total time `take` blocked
+        self._queue: queue.Queue = queue.Queue(maxsize=max(capacity, 1))
+        self._stop = threading.Event()
+        scenarios = itertools.islice(iter_scenarios(config), start, None)
+        self._thread = threading.Thread(target=self._fill, args=(scenarios, config), daemon=True)
+        self._thread.start()
+
+    def _fill(self, scenarios: Iterator, config: DataConfig) -> None:
+        try:
+            for scenario in scenarios:
+                state = scenario_to_numpy_state(scenario, config)
+                while not self._stop.is_set():
+                    try:
+                        self._queue.put(state, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if self._stop.is_set():
+                    return
+            self._queue.put(_END)
+        except Exception as error:  # noqa: BLE001 -- re-raised in the consumer's thread
+            self._queue.put(error)
+
+    def take(self, count: int) -> SimulatorState:
+        """The next `count` states stacked (numpy, leading axis count)."""
+        states = []
+        start = time.perf_counter()
+        while len(states) < count:
+            item = self._queue.get()
+            if item is _END:
+                raise RuntimeError("the scenario stream ended (it should repeat forever)")
+            if isinstance(item, Exception):
+                raise item
+            states.append(item)
+        self.waited_s += time.perf_counter() - start
+        self.consumed += count
+        return stack_states(states)
+
+    def close(self) -> None:
+        self._stop.set()
+
+
+def initial_pool(stream: ScenarioStream, pool_size: int) -> SimulatorState:
+    """The first `pool_size` states of a fresh stream, on the device."""
+    return jax.device_put(stream.take(pool_size))
+
+
+def pool_slots(first_index: int, count: int, pool_size: int) -> np.ndarray:
+    """Pool slots of stream indices first_index .. first_index + count - 1. (count,) int32"""
+    return (np.arange(first_index, first_index + count) % pool_size).astype(np.int32)
+
+
+@jax.jit
+def _write_rows(pool: SimulatorState, slots: jax.Array, fresh: SimulatorState) -> SimulatorState:
+    return jax.tree.map(lambda p, f: p.at[slots].set(f), pool, fresh)
+
+
+def refresh_pool(pool: SimulatorState, stream: ScenarioStream, count: int) -> SimulatorState:
+    """Swaps the next `count` scenarios of the stream into their pool slots."""
+    if count == 0:
+        return pool
+    pool_size = pool.timestep.shape[0]
+    slots = pool_slots(stream.consumed, count, pool_size)
+    return _write_rows(pool, jnp.asarray(slots), jax.device_put(stream.take(count)))
+
+
+def rebuild_pool(config: DataConfig, consumed: int, pool_size: int) -> tuple[SimulatorState, ScenarioStream]:
+    """The pool as it was after `consumed` stream scenarios, and the stream positioned after them.
+
+    Slot j holds the latest stream index n < consumed with n % pool_size == j.
+    """
+    first = max(consumed - pool_size, 0)
+    stream = ScenarioStream(config, start=first)
+    states = stream.take(consumed - first)
+    slots = pool_slots(first, consumed - first, pool_size)
+    order = np.argsort(slots)
+    pool = jax.tree.map(lambda a: a[order], states)
+    return jax.device_put(pool), stream

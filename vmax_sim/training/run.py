@@ -1,0 +1,426 @@
+"""`train`: a whole training run into a run directory, resumable after a crash or `kill -9`.
+
+RUN_DIR/
+  config.json          the TrainConfig (and the package version) -- everything needed to resume or evaluate
+  checkpoints/<step>/  Orbax checkpoints: learner state, environments, replay buffer (optional), PRNG key,
+                       and the host's position in the scenario stream
+  metrics.csv          every logged scalar, one row per chunk (env_steps first)
+  tensorboard/         TensorBoard event files of the same scalars
+  eval.csv             the held-out evaluations (accuracy, V-Max score, ...)
+  learning_curve.png   accuracy and V-Max score against env steps and wall time
+  summary.json         the final evaluation and run statistics
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+import os
+import resource
+import shutil
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from scenariomax.sources.base import InputError
+from vmax_sim.agents import make_learner
+from vmax_sim.data import DataConfig
+from vmax_sim.env.learning import LearningEnv
+from vmax_sim.networks import make_encoder
+from vmax_sim.training.buffer import buffer_init, transition_bytes
+from vmax_sim.training.checkpoint import CheckpointStore
+from vmax_sim.training.config import TrainConfig, config_from_dict, config_to_dict
+from vmax_sim.training.logger import RunLogger
+from vmax_sim.training.loop import (
+    OFF_POLICY,
+    TrainCarry,
+    env_steps_per_chunk,
+    make_off_policy_chunk,
+    make_on_policy_chunk,
+    transition_of,
+)
+from vmax_sim.training.parallel import data_mesh, shard_carry
+from vmax_sim.training.pool import ScenarioStream, initial_pool, rebuild_pool, refresh_pool
+
+CONFIG_FILE = "config.json"
+
+
+@dataclasses.dataclass
+class TrainResult:
+    run_dir: Path
+    env_steps: int
+    wall_s: float
+    env_steps_per_s: float
+    final_evaluation: dict | None  # evaluate()'s summary of the trained policy on the held-out split
+    summary: dict
+
+
+def _learning_env(config: TrainConfig) -> LearningEnv:
+    return LearningEnv(config.env, config.obs, config.reward)
+
+
+def build_learner(config: TrainConfig, env: LearningEnv):
+    network = config.network
+    return make_learner(config.algo, config.algo_config, lambda: make_encoder(network), env.action_dim)
+
+
+@functools.lru_cache(maxsize=8)
+def components(config: TrainConfig):
+    """(LearningEnv, Learner) of a configuration, built once per process so jitted functions are reused."""
+    env = _learning_env(config)
+    return env, build_learner(config, env)
+
+
+_CHUNKS: dict = {}
+
+
+def _chunk_function(config: TrainConfig, learner, env: LearningEnv, shapes):
+    """The jitted chunk of `config` (one per configuration and process)."""
+    if config in _CHUNKS:
+        return _CHUNKS[config]
+    algo_config = config.algo_config
+    if config.algo in OFF_POLICY:
+        learner_shapes, example = shapes
+        sample = jax.tree.map(lambda a: jax.ShapeDtypeStruct((algo_config.batch_size,) + a.shape, a.dtype), example)
+        template = jax.eval_shape(lambda s, b, k: learner.update(s, b, k)[1], learner_shapes, sample,
+                                  jax.random.PRNGKey(0))
+        template = jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), template)
+        chunk = make_off_policy_chunk(env, learner, config.algo, algo_config, config.train.chunk_steps, template)
+    else:
+        chunk = make_on_policy_chunk(env, learner, algo_config, config.train.chunk_steps)
+    _CHUNKS[config] = jax.jit(chunk, donate_argnums=(0,))
+    return _CHUNKS[config]
+
+
+def train_data_config(config: TrainConfig, path: str, seed: int) -> DataConfig:
+    data = config.data
+    return DataConfig(path=path, batch_size=1, num_objects=data.num_objects,
+                      num_roadgraph_points=data.num_roadgraph_points, num_paths=data.num_paths,
+                      num_points_per_path=data.num_points_per_path, max_num_lights=data.max_num_lights,
+                      shuffle_seed=seed, shuffle_buffer=data.shuffle_buffer, repeat=True, prefetch=0)
+
+
+def eval_data_config(config: TrainConfig, path: str) -> DataConfig:
+    data = config.data
+    return DataConfig(path=path, batch_size=config.train.eval_batch_size, num_objects=data.num_objects,
+                      num_roadgraph_points=data.num_roadgraph_points, num_paths=data.num_paths,
+                      num_points_per_path=data.num_points_per_path, max_num_lights=data.max_num_lights)
+
+
+# ----------------------------------------------------------------------------- embedded synthetic data
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("VMAX_CACHE_DIR", Path.home() / ".cache" / "vmax_sim"))
+
+
+def synthetic_split(num_scenarios: int, seed: int, num_objects: int, print_fn: Callable[[str], None]) -> str:
+    """Shards of `num_scenarios` synthetic scenarios drawn with `seed`, generated once into the cache."""
+    from scenariomax.enrich.transform import make_transform
+    from scenariomax.pipeline import ConvertSettings, convert
+    from scenariomax.schema import Sizes
+    from scenariomax.sources.synthetic import SyntheticSource
+
+    out = cache_dir() / "synthetic" / f"seed{seed}-n{num_scenarios}-objects{num_objects}"
+    if (out / "manifest.json").exists() and json.loads((out / "manifest.json").read_text()).get("state") == "complete":
+        return str(out)
+    if out.exists():
+        shutil.rmtree(out)  # an unfinished generation of our own cache folder
+    print_fn(f"generating {num_scenarios} synthetic scenarios (seed {seed}) into {out} (once; cached)")
+    sizes = Sizes(num_objects=num_objects)
+    transform, transform_settings = make_transform()
+    settings = ConvertSettings(out=out, workers=None, sizes=sizes, progress=True, transform=transform,
+                               transform_settings=transform_settings)
+    result = convert(SyntheticSource(num_scenarios=num_scenarios, seed=seed, sizes=sizes), settings)
+    if result.num_scenarios == 0:
+        raise InputError(f"{out}: the synthetic generator produced no scenarios")
+    return str(out)
+
+
+def resolve_data(config: TrainConfig, print_fn: Callable[[str], None]) -> tuple[str, str]:
+    """(train path, eval path): the configured shards, or the embedded synthetic splits (disjoint seeds)."""
+    data = config.data
+    train = data.train or synthetic_split(data.synthetic_train_scenarios, data.synthetic_seed, data.num_objects,
+                                          print_fn)
+    evaluation = data.eval or synthetic_split(data.synthetic_eval_scenarios, data.synthetic_seed + 1,
+                                              data.num_objects, print_fn)
+    return train, evaluation
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process (MB)."""
+    usage = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return usage / 1024.0 if sys.platform != "darwin" else usage / 2**20
+
+
+def _float_dtype(name: str):
+    return {"float16": jnp.float16, "bfloat16": jnp.bfloat16, "float32": jnp.float32}[name]
+
+
+def _host_scalars(stats: dict) -> dict[str, float]:
+    """Chunk sums -> the logged means (episode stats per finished episode)."""
+    values = {k: float(v) for k, v in jax.device_get(stats).items()}
+    episodes = values.pop("episodes")
+    out: dict[str, float] = {"episodes": episodes}
+    for key in list(values):
+        if key.startswith("episode/"):
+            total = values.pop(key)
+            out[key] = total / episodes if episodes > 0 else math.nan
+    reward_sum, reward_count = values.pop("reward_sum"), values.pop("reward_count")
+    out["reward_mean"] = reward_sum / max(reward_count, 1.0)
+    out.update(values)
+    return out
+
+
+def save_run_config(run_dir: Path, config: TrainConfig) -> None:
+    from vmax_sim import __version__
+
+    values = {"vmax_version": __version__, "config": config_to_dict(config)}
+    (run_dir / CONFIG_FILE).write_text(json.dumps(values, indent=2))
+
+
+def load_run_config(run_dir: str | Path) -> TrainConfig:
+    path = Path(run_dir) / CONFIG_FILE
+    if not path.exists():
+        raise InputError(f"{run_dir}: not a training run directory (no {CONFIG_FILE})")
+    try:
+        return config_from_dict(json.loads(path.read_text())["config"])
+    except (KeyError, TypeError, ValueError) as error:
+        raise InputError(f"{path}: unreadable run configuration ({error})") from None
+
+
+# ----------------------------------------------------------------------------- the run
+
+
+class _Progress:
+    """tqdm bar over env steps when stderr is a terminal, plain lines every ~10 s otherwise."""
+
+    def __init__(self, total: int, initial: int, enabled: bool):
+        self.enabled = enabled
+        self.bar = None
+        self.last_line = 0.0
+        if enabled and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, initial=initial, unit="step", unit_scale=True, dynamic_ncols=True)
+        self.total = total
+
+    def update(self, steps: int, env_steps: int, postfix: dict[str, str]) -> None:
+        if not self.enabled:
+            return
+        if self.bar is not None:
+            self.bar.update(steps)
+            self.bar.set_postfix(postfix, refresh=False)
+        elif time.time() - self.last_line > 10.0 or env_steps >= self.total:
+            self.last_line = time.time()
+            fields = "  ".join(f"{k} {v}" for k, v in postfix.items())
+            print(f"train {env_steps}/{self.total} env steps  {fields}", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def train(config: TrainConfig, run_dir: str | Path, *, resume: bool = False, progress: bool = True,
+          print_fn: Callable[[str], None] = print, stop_after_chunks: int | None = None) -> TrainResult:
+    """Trains `config` into `run_dir` (or continues it from its last checkpoint with `resume`).
+
+    stop_after_chunks stops early (tests: a run "killed" after that many chunks, then resumed).
+    """
+    run_dir = Path(run_dir)
+    if resume:
+        saved = load_run_config(run_dir)
+        if saved != config and config is not None:
+            print_fn("resuming with the run directory's own configuration (config.json)")
+        config = saved
+    elif (run_dir / CONFIG_FILE).exists():
+        raise InputError(f"{run_dir}: already holds a training run; pass --resume to continue it or choose "
+                         f"another --out")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    loop = config.train
+    algo_config = config.algo_config
+    train_path, eval_path = resolve_data(config, print_fn)
+    if not resume:
+        save_run_config(run_dir, config)
+
+    env, learner = components(config)
+    num_envs = algo_config.num_envs
+    mesh = data_mesh(num_envs)
+    store = CheckpointStore(run_dir / "checkpoints", keep=loop.keep_checkpoints)
+    data_config = train_data_config(config, train_path, loop.seed)
+
+    # ---- initial or restored state
+    key = jax.random.PRNGKey(loop.seed)
+    env_key, learner_key, loop_key = jax.random.split(key, 3)
+    restored_step = store.latest_step() if resume else None
+    if restored_step is not None:
+        host = store.host_state(restored_step)
+        pool, stream = rebuild_pool(data_config, host["consumed"], loop.pool_size)
+    else:
+        host = {"consumed": 0, "wall_s": 0.0, "chunks": 0}
+        stream = ScenarioStream(data_config)
+        pool = initial_pool(stream, loop.pool_size)
+    env_state = env.reset(pool, num_envs, env_key)
+    learner_state = learner.init(learner_key, env_state.observation)
+    buffer = None
+    float_dtype = _float_dtype(loop.buffer_dtype)
+    if config.algo in OFF_POLICY:
+        shapes = jax.eval_shape(
+            lambda s: transition_of(env.step(s, jnp.zeros((num_envs, env.action_dim)), pool)[1]), env_state)
+        example = jax.tree.map(lambda a: jnp.zeros(a.shape[1:], a.dtype), shapes)  # one unbatched transition
+        per_transition = transition_bytes(example, float_dtype)
+        print_fn(f"replay buffer: {algo_config.buffer_size:,} transitions x {per_transition:,} B = "
+                 f"{algo_config.buffer_size * per_transition / 2**20:,.0f} MiB ({loop.buffer_dtype} observations)")
+        buffer = buffer_init(example, algo_config.buffer_size, float_dtype, num_blocks=mesh.size if mesh else 1)
+    carry = TrainCarry(learner=learner_state, env=env_state, buffer=buffer, key=loop_key,
+                       env_steps=jnp.zeros((), jnp.int32))
+    if restored_step is not None:
+        carry = store.restore(restored_step, carry, with_buffer=loop.save_buffer)
+        print_fn(f"resumed {run_dir} at {restored_step:,} env steps")
+    if mesh is not None:
+        carry, pool = shard_carry(carry, pool, mesh)
+        print_fn(f"data-parallel over {mesh.size} devices ({num_envs // mesh.size} envs each)")
+
+    carry = jax.tree.map(lambda a: jnp.array(a, copy=True), carry)  # distinct buffers: the chunk donates them
+
+    # ---- the jitted chunk (cached per configuration: a resumed or repeated run in one process reuses it)
+    chunk_fn = _chunk_function(config, learner, env, jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype),
+                                                                   (learner_state, example if buffer else None)))
+    per_chunk = env_steps_per_chunk(config.algo, algo_config, loop.chunk_steps)
+
+    logger = RunLogger(run_dir)
+    evaluator = _Evaluator(config, eval_path, env, learner, run_dir, print_fn)
+    env_steps = int(carry.env_steps)
+    if resume:
+        logger.truncate_after(env_steps)
+        evaluator.truncate_after(env_steps)
+    bar = _Progress(loop.total_env_steps, env_steps, progress)
+    wall_before = float(host["wall_s"])
+    start = time.perf_counter()
+    last_checkpoint = env_steps
+    last_eval = env_steps if env_steps > 0 else 0
+    chunks = 0
+    try:
+        while env_steps < loop.total_env_steps:
+            tick = time.perf_counter()
+            carry, stats = chunk_fn(carry, pool)
+            scalars = _host_scalars(stats)  # blocks until the chunk is done
+            pool = refresh_pool(pool, stream, loop.pool_refresh)
+            env_steps = int(carry.env_steps)
+            elapsed = time.perf_counter() - tick
+            scalars.update({"sps": per_chunk / elapsed, "wall_s": wall_before + time.perf_counter() - start,
+                            "peak_rss_mb": peak_rss_mb(), "data_wait_s": stream.waited_s})
+            logger.log(env_steps, scalars)
+            chunks += 1
+            bar.update(per_chunk, env_steps, {"sps": f"{scalars['sps']:.0f}",
+                                              "return": f"{scalars.get('episode/return', math.nan):.2f}",
+                                              "acc": f"{scalars.get('episode/accuracy', math.nan):.2f}"})
+            if loop.eval_every and env_steps - last_eval >= loop.eval_every and env_steps < loop.total_env_steps:
+                evaluator.run(learner.policy_params(carry.learner), env_steps, scalars["wall_s"])
+                last_eval = env_steps
+            if env_steps - last_checkpoint >= loop.checkpoint_every or env_steps >= loop.total_env_steps:
+                store.save(env_steps, carry, {"consumed": stream.consumed, "wall_s": scalars["wall_s"],
+                                              "chunks": int(host["chunks"]) + chunks}, with_buffer=loop.save_buffer)
+                last_checkpoint = env_steps
+            if stop_after_chunks is not None and chunks >= stop_after_chunks:
+                break
+    finally:
+        bar.close()
+        stream.close()
+        logger.flush()
+    wall_s = wall_before + time.perf_counter() - start
+    finished = env_steps >= loop.total_env_steps
+    final = None
+    if finished:
+        final = evaluator.run(learner.policy_params(carry.learner), env_steps, wall_s)
+        evaluator.plot(run_dir / "learning_curve.png", logger.rows)
+    logger.close()
+    rows = [row for row in logger.rows if "sps" in row]
+    sps = float(np.median([row["sps"] for row in rows[1:]])) if len(rows) > 1 else math.nan
+    summary = {"run_dir": str(run_dir), "algo": config.algo, "encoder": config.network.name,
+               "reward": config.reward.preset, "env_steps": env_steps, "wall_s": wall_s,
+               "median_env_steps_per_s": sps, "peak_rss_mb": peak_rss_mb(), "finished": finished,
+               "final_evaluation": final}
+    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
+    return TrainResult(run_dir=run_dir, env_steps=env_steps, wall_s=wall_s, env_steps_per_s=sps,
+                       final_evaluation=final, summary=summary)
+
+
+class _Evaluator:
+    """Held-out evaluation of the current policy with `vmax_sim.evaluation.evaluate` (scenarios
+    converted once, one compilation for every evaluation of the run)."""
+
+    def __init__(self, config: TrainConfig, eval_path: str, env: LearningEnv, learner, run_dir: Path, print_fn):
+        self.config = config
+        self.data = eval_data_config(config, eval_path)
+        self.policy = _policy_of(config)
+        self.env_config = env.env_config
+        self.path = run_dir / "eval.csv"
+        self.print_fn = print_fn
+        self._prepared = None
+
+    def truncate_after(self, env_steps: int) -> None:
+        rows = self.rows()
+        self._write([row for row in rows if row["env_steps"] <= env_steps])
+
+    def rows(self) -> list[dict]:
+        import csv
+
+        if not self.path.exists():
+            return []
+        with self.path.open(newline="") as handle:
+            return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(handle)]
+
+    def _write(self, rows: list[dict]) -> None:
+        import csv
+
+        if not rows:
+            self.path.unlink(missing_ok=True)
+            return
+        with self.path.open("w", newline="") as handle:
+            writer = csv.DictWriter(handle, list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+
+    def run(self, params, env_steps: int, wall_s: float) -> dict:
+        from vmax_sim.evaluation.evaluate import evaluate, prepare_batches
+
+        if self._prepared is None:
+            self._prepared = prepare_batches(self.data, self.config.train.eval_scenarios)
+        result = evaluate(self.policy, self._prepared, data_config=self.data, env_config=self.env_config,
+                          obs_config=self.config.obs, policy_params=params)
+        summary = result.summary
+        row = {"env_steps": float(env_steps), "wall_s": float(wall_s), "accuracy": summary["accuracy"],
+               "vmax_score": summary["vmax_score"], "nuplan_score": summary["nuplan_score"],
+               "accuracy_at_fault": summary["accuracy_at_fault"]}
+        row.update({k: float(v) for k, v in summary["metrics"].items() if v is not None and k in EVAL_COLUMNS})
+        self._write(self.rows() + [row])
+        self.print_fn(f"eval @ {env_steps:,} env steps: accuracy {summary['accuracy']:.3f}  "
+                      f"V-Max score {summary['vmax_score']:.3f}  ({summary['num_episodes']} held-out episodes)")
+        return summary
+
+    def plot(self, path: Path, train_rows: list[dict]) -> None:
+        from vmax_sim.training.plots import plot_learning_curve
+
+        plot_learning_curve(path, self.rows(), train_rows, title=f"{self.config.algo} / {self.config.network.name}")
+
+
+@functools.lru_cache(maxsize=8)
+def _policy_of(config: TrainConfig):
+    """The evaluation Policy of a configuration's learner (cached: evaluate's rollout compiles once)."""
+    from vmax_sim.evaluation.trained import trained_policy
+
+    return trained_policy(components(config)[1], name=f"{config.algo}-{config.network.name}")
+
+
+EVAL_COLUMNS = ("overlap", "offroad", "red_light", "off_route", "ego_progress", "comfort", "progress_ratio")
