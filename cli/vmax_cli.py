@@ -132,7 +132,7 @@ def evaluate(policy, data, mode, batch_size, num_scenarios, num_objects, as_json
 
 @main.command()
 @click.option("--out", default="runs/demo", show_default=True, type=click.Path(file_okay=False))
-@click.option("--num-scenarios", type=click.IntRange(1), default=64, show_default=True,
+@click.option("--num-scenarios", type=click.IntRange(1), default=160, show_default=True,
               help="Synthetic training scenarios.")
 @click.option("--num-eval-scenarios", type=click.IntRange(1), default=32, show_default=True,
               help="Held-out synthetic scenarios (next seed).")

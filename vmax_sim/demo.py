@@ -56,7 +56,7 @@ def comparison_table(summaries: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
-def run_demo(out: str | Path = "runs/demo", num_scenarios: int = 64, num_eval_scenarios: int = 32, seed: int = 0,
+def run_demo(out: str | Path = "runs/demo", num_scenarios: int = 160, num_eval_scenarios: int = 32, seed: int = 0,
              workers: int | None = None, train_steps: int = 24_000, num_objects: int = 64,
              print_fn: Callable[[str], None] = print, progress: bool = True, overrides: Sequence[str] = ()) -> dict:
     """Runs the demo into `out` and returns the summary dict (also written to out/summary.json).

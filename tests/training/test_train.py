@@ -87,6 +87,7 @@ def _cli_overrides(shards: Path) -> list[str]:
     return ["--data", str(shards), "--eval-data", str(shards), *config_words]
 
 
+@pytest.mark.slow
 def test_cli_train_then_evaluate_the_run(synthetic_shards, tmp_path):
     run = tmp_path / "cli-run"
     done = _cli("train", "--preset", "bc-mlp", "--out", str(run), "--quiet", *_cli_overrides(synthetic_shards),

@@ -27,6 +27,12 @@ from vmax_sim.datatypes import SimulatorState
 _END = object()
 
 
+def slim_state(state: SimulatorState) -> SimulatorState:
+    """Drops the raw roadgraph points (a quarter of a state's bytes): the learning environment's metrics and
+    observation read the map index built from them, never the points. One point is kept for the shapes."""
+    return state.replace(roadgraph_points=jax.tree.map(lambda a: a[:1], state.roadgraph_points))
+
+
 class ScenarioStream:
     """Converted numpy states of `config`'s scenarios in stream order, from index `start` on."""
 
@@ -42,7 +48,7 @@ class ScenarioStream:
     def _fill(self, scenarios: Iterator, config: DataConfig) -> None:
         try:
             for scenario in scenarios:
-                state = scenario_to_numpy_state(scenario, config)
+                state = slim_state(scenario_to_numpy_state(scenario, config))
                 while not self._stop.is_set():
                     try:
                         self._queue.put(state, timeout=0.1)
@@ -71,7 +77,15 @@ class ScenarioStream:
         return stack_states(states)
 
     def close(self) -> None:
+        """Stops the converter thread and waits for it (a daemon thread killed at interpreter exit while
+        inside numpy / JAX code aborts the process)."""
         self._stop.set()
+        while True:  # unblock a put() waiting on a full queue
+            try:
+                self._queue.get_nowait()
+            except queue.Empty:
+                break
+        self._thread.join(timeout=30)
 
 
 def initial_pool(stream: ScenarioStream, pool_size: int) -> SimulatorState:

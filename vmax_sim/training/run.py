@@ -202,6 +202,64 @@ def load_run_config(run_dir: str | Path) -> TrainConfig:
 # ----------------------------------------------------------------------------- the run
 
 
+@dataclasses.dataclass
+class TrainingSetup:
+    """Everything a run needs on the device, before the first chunk."""
+
+    env: LearningEnv
+    learner: object
+    carry: TrainCarry
+    pool: object  # SimulatorState (pool_size, ...)
+    stream: ScenarioStream
+    chunk_fn: Callable
+    per_chunk: int  # env steps per chunk
+    mesh: object  # jax Mesh or None
+    buffer_mib: float
+
+
+def setup_training(config: TrainConfig, train_path: str, print_fn: Callable[[str], None] = print,
+                   consumed: int | None = None) -> TrainingSetup:
+    """Fresh carry, scenario pool and jitted chunk of `config` (the pool as after `consumed` scenarios when
+    resuming; the caller then restores the carry from the checkpoint)."""
+    loop, algo_config = config.train, config.algo_config
+    env, learner = components(config)
+    num_envs = algo_config.num_envs
+    mesh = data_mesh(num_envs)
+    data_config = train_data_config(config, train_path, loop.seed)
+    env_key, learner_key, loop_key = jax.random.split(jax.random.PRNGKey(loop.seed), 3)
+    if consumed is not None:
+        pool, stream = rebuild_pool(data_config, consumed, loop.pool_size)
+    else:
+        stream = ScenarioStream(data_config)
+        pool = initial_pool(stream, loop.pool_size)
+    # jitted: run eagerly, reset and init leave ~1 GB of freed-but-kept host memory behind
+    env_state = jax.jit(env.reset, static_argnums=1)(pool, num_envs, env_key)
+    learner_state = jax.jit(learner.init)(learner_key, env_state.observation)
+    buffer, example, buffer_mib = None, None, 0.0
+    float_dtype = _float_dtype(loop.buffer_dtype)
+    if config.algo in OFF_POLICY:
+        shapes = jax.eval_shape(
+            lambda s: transition_of(env.step(s, jnp.zeros((num_envs, env.action_dim)), pool)[1]), env_state)
+        example = jax.tree.map(lambda a: jnp.zeros(a.shape[1:], a.dtype), shapes)  # one unbatched transition
+        per_transition = transition_bytes(example, float_dtype)
+        buffer_mib = algo_config.buffer_size * per_transition / 2**20
+        print_fn(f"replay buffer: {algo_config.buffer_size:,} transitions x {per_transition:,} B = "
+                 f"{buffer_mib:,.0f} MiB ({loop.buffer_dtype} observations)")
+        buffer = buffer_init(example, algo_config.buffer_size, float_dtype, num_blocks=mesh.size if mesh else 1)
+    carry = TrainCarry(learner=learner_state, env=env_state, buffer=buffer, key=loop_key,
+                       env_steps=jnp.zeros((), jnp.int32))
+    carry = jax.tree.map(lambda a: jnp.array(a, copy=True), carry)  # distinct buffers: the chunk donates them
+    if mesh is not None:
+        carry, pool = shard_carry(carry, pool, mesh)
+        print_fn(f"data-parallel over {mesh.size} devices ({num_envs // mesh.size} envs each)")
+    # the jitted chunk is cached per configuration: a resumed or repeated run in one process reuses it
+    shapes = jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype), (learner_state, example))
+    chunk_fn = _chunk_function(config, learner, env, shapes)
+    return TrainingSetup(env=env, learner=learner, carry=carry, pool=pool, stream=stream, chunk_fn=chunk_fn,
+                         per_chunk=env_steps_per_chunk(config.algo, algo_config, loop.chunk_steps), mesh=mesh,
+                         buffer_mib=buffer_mib)
+
+
 class _Progress:
     """tqdm bar over env steps when stderr is a terminal, plain lines every ~10 s otherwise."""
 
@@ -248,58 +306,36 @@ def train(config: TrainConfig, run_dir: str | Path, *, resume: bool = False, pro
                          f"another --out")
     run_dir.mkdir(parents=True, exist_ok=True)
     loop = config.train
-    algo_config = config.algo_config
     train_path, eval_path = resolve_data(config, print_fn)
     if not resume:
         save_run_config(run_dir, config)
 
-    env, learner = components(config)
-    num_envs = algo_config.num_envs
-    mesh = data_mesh(num_envs)
     store = CheckpointStore(run_dir / "checkpoints", keep=loop.keep_checkpoints)
-    data_config = train_data_config(config, train_path, loop.seed)
-
-    # ---- initial or restored state
-    key = jax.random.PRNGKey(loop.seed)
-    env_key, learner_key, loop_key = jax.random.split(key, 3)
     restored_step = store.latest_step() if resume else None
-    if restored_step is not None:
-        host = store.host_state(restored_step)
-        pool, stream = rebuild_pool(data_config, host["consumed"], loop.pool_size)
-    else:
-        host = {"consumed": 0, "wall_s": 0.0, "chunks": 0}
-        stream = ScenarioStream(data_config)
-        pool = initial_pool(stream, loop.pool_size)
-    env_state = env.reset(pool, num_envs, env_key)
-    learner_state = learner.init(learner_key, env_state.observation)
-    buffer = None
-    float_dtype = _float_dtype(loop.buffer_dtype)
-    if config.algo in OFF_POLICY:
-        shapes = jax.eval_shape(
-            lambda s: transition_of(env.step(s, jnp.zeros((num_envs, env.action_dim)), pool)[1]), env_state)
-        example = jax.tree.map(lambda a: jnp.zeros(a.shape[1:], a.dtype), shapes)  # one unbatched transition
-        per_transition = transition_bytes(example, float_dtype)
-        print_fn(f"replay buffer: {algo_config.buffer_size:,} transitions x {per_transition:,} B = "
-                 f"{algo_config.buffer_size * per_transition / 2**20:,.0f} MiB ({loop.buffer_dtype} observations)")
-        buffer = buffer_init(example, algo_config.buffer_size, float_dtype, num_blocks=mesh.size if mesh else 1)
-    carry = TrainCarry(learner=learner_state, env=env_state, buffer=buffer, key=loop_key,
-                       env_steps=jnp.zeros((), jnp.int32))
+    host = store.host_state(restored_step) if restored_step is not None else {"consumed": 0, "wall_s": 0.0,
+                                                                                "chunks": 0}
+    setup = setup_training(config, train_path, print_fn, consumed=host["consumed"] if restored_step else None)
+    try:
+        return _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, restored_step, host,
+                    setup, eval_path)
+    finally:
+        setup.stream.close()
+
+
+def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, restored_step, host, setup,
+         eval_path) -> TrainResult:
+    loop = config.train
+    carry, pool, stream, chunk_fn, per_chunk = setup.carry, setup.pool, setup.stream, setup.chunk_fn, setup.per_chunk
+    learner = setup.learner
     if restored_step is not None:
         carry = store.restore(restored_step, carry, with_buffer=loop.save_buffer)
+        carry = jax.tree.map(lambda a: jnp.array(a, copy=True), carry)
+        if setup.mesh is not None:
+            carry, pool = shard_carry(carry, pool, setup.mesh)
         print_fn(f"resumed {run_dir} at {restored_step:,} env steps")
-    if mesh is not None:
-        carry, pool = shard_carry(carry, pool, mesh)
-        print_fn(f"data-parallel over {mesh.size} devices ({num_envs // mesh.size} envs each)")
-
-    carry = jax.tree.map(lambda a: jnp.array(a, copy=True), carry)  # distinct buffers: the chunk donates them
-
-    # ---- the jitted chunk (cached per configuration: a resumed or repeated run in one process reuses it)
-    chunk_fn = _chunk_function(config, learner, env, jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype),
-                                                                   (learner_state, example if buffer else None)))
-    per_chunk = env_steps_per_chunk(config.algo, algo_config, loop.chunk_steps)
 
     logger = RunLogger(run_dir)
-    evaluator = _Evaluator(config, eval_path, env, learner, run_dir, print_fn)
+    evaluator = _Evaluator(config, eval_path, run_dir, print_fn)
     env_steps = int(carry.env_steps)
     if resume:
         logger.truncate_after(env_steps)
@@ -360,11 +396,11 @@ class _Evaluator:
     """Held-out evaluation of the current policy with `vmax_sim.evaluation.evaluate` (scenarios
     converted once, one compilation for every evaluation of the run)."""
 
-    def __init__(self, config: TrainConfig, eval_path: str, env: LearningEnv, learner, run_dir: Path, print_fn):
+    def __init__(self, config: TrainConfig, eval_path: str, run_dir: Path, print_fn):
         self.config = config
         self.data = eval_data_config(config, eval_path)
         self.policy = _policy_of(config)
-        self.env_config = env.env_config
+        self.env_config = components(config)[0].env_config
         self.path = run_dir / "eval.csv"
         self.print_fn = print_fn
         self._prepared = None

@@ -1,0 +1,77 @@
+"""Training throughput by algorithm and encoder: `python benchmarks/training.py [--quick] [--json]`.
+
+Each configuration runs in its own process (peak RSS is per process): the jitted chunk is timed after
+warm-up with learning active from the first step. Results go to docs/benchmarks.md with the machine.
+Extra `section.field=value` arguments apply to every configuration (e.g. data.train=shards/).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+
+CONFIGS = [  # (preset, overrides)
+    ("paper-sac-lq", ["algo.buffer_size=100000"]),
+    ("sac-lq", []),
+    ("sac-mlp", []),
+    ("sac-none", []),
+    ("sac-lqh", []),
+    ("sac-wayformer", []),
+    ("sac-mtr", []),
+    ("ppo-lq", []),
+    ("ppo-mlp", []),
+    ("bc-mlp", []),
+    ("bc_sac-lq", []),
+]
+
+
+def _one(preset: str, overrides: list[str], chunks: int) -> dict:
+    from vmax_sim.training import apply_overrides, preset_config
+    from vmax_sim.training.throughput import measure_throughput
+
+    config = apply_overrides(preset_config(preset), ["train.pool_size=32", *overrides])
+    result = measure_throughput(config, num_chunks=chunks)
+    result["preset"] = preset
+    result["overrides"] = overrides
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--quick", action="store_true", help="three configurations, fewer chunks")
+    parser.add_argument("--json", action="store_true")
+    parser.add_argument("--only", default=None, help="comma-separated presets")
+    parser.add_argument("--chunks", type=int, default=6)
+    parser.add_argument("--child", nargs="*", help=argparse.SUPPRESS)
+    args, extra = parser.parse_known_args()
+    if args.child is not None:
+        preset, *overrides = args.child
+        print(json.dumps(_one(preset, overrides, args.chunks)))
+        return
+    configs = CONFIGS[:3] if args.quick else CONFIGS
+    if args.only:
+        wanted = set(args.only.split(","))
+        configs = [c for c in CONFIGS if c[0] in wanted]
+    rows = []
+    for preset, overrides in configs:
+        done = subprocess.run([sys.executable, __file__, "--chunks", str(args.chunks), "--child", preset,
+                               *overrides, *extra], capture_output=True, text=True)
+        if done.returncode != 0:
+            tail = "\n  ".join(done.stderr.strip().splitlines()[-12:])
+            print(f"{preset}: failed:\n  {tail}", file=sys.stderr)
+            continue
+        row = json.loads(done.stdout.strip().splitlines()[-1])
+        rows.append(row)
+        if not args.json:
+            print(f"{preset:<16} {' '.join(overrides):<24} envs {row['num_envs']:>4}  "
+                  f"{row['env_steps_per_s']:>9,.0f} env steps/s  (min {row['min']:,.0f}, max {row['max']:,.0f})  "
+                  f"peak RSS {row['peak_rss_mb']:,.0f} MB  buffer {row['buffer_mib']:,.0f} MiB  [{row['device']}]",
+                  flush=True)
+    if args.json:
+        print(json.dumps(rows, indent=2))
+
+
+if __name__ == "__main__":
+    main()
