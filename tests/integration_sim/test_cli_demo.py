@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import pytest
 from click.testing import CliRunner
 
 from cli.vmax_cli import main
@@ -34,6 +35,7 @@ def test_bench_rejects_bad_batch_sizes():
     assert result.exit_code == 2 and "comma-separated integers" in result.output
 
 
+@pytest.mark.slow
 def test_run_demo_trains_evaluates_and_draws(tmp_path):
     lines = []
     tiny = ["network.mlp_hidden=32", "network.embed_dim=16", "network.output_dim=32", "algo.num_envs=4",
