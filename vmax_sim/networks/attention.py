@@ -3,15 +3,17 @@
 Shapes: B batch, Q queries, T tokens (keys / values), P points of a polyline, D width, H heads,
 d = D / H per head. Masks are bool, True = valid.
 
-Why by hand: flax's `dot_product_attention_weights` sets masked logits to `finfo.min` and takes a
-plain softmax, so a query whose keys are all masked gets *uniform* weights over those masked keys
-and its output is the mean of their values, which depends on the masked features. Here masked
-weights are forced to exactly 0 after the softmax, so such a row returns 0 (then the output bias).
+Why by hand: flax's `dot_product_attention_weights` (flax 0.12) sets masked logits to `finfo.min` and
+takes a plain softmax. With some keys valid that is exact (masked weights underflow to 0), but a query
+whose keys are *all* masked gets uniform weights over those masked keys, so its output is the mean of
+their values and moves with the masked features (`jax.nn.dot_product_attention` does the same). Here
+masked weights are forced to exactly 0 after the softmax, so such a row returns 0 (then the output bias).
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 
 import flax.linen as nn
 import jax
@@ -114,8 +116,7 @@ class MultiHeadAttention(nn.Module):
         batch, num_tokens = tokens.shape[0], tokens.shape[1]
         q = Dense(dim, name="query")(queries) * head_dim**-0.5  # (B, Q, D) or (Q, D)
         q = q.reshape(q.shape[:-1] + (heads, head_dim))  # (B, Q, H, d) or (Q, H, d)
-        kv = Dense(2 * dim, name="key_value")(tokens)  # (B, T, 2D): one matmul for keys and values
-        kv = kv.reshape(batch, num_tokens, 2, heads, head_dim)  # (B, T, 2, H, d)
+        kv = Dense(2 * dim, name="key_value")(tokens).reshape(batch, num_tokens, 2, heads, head_dim)
         keys, values = kv[:, :, 0], kv[:, :, 1]  # (B, T, H, d) each
         spec = "bqhd,bthd->bhqt" if q.ndim == 4 else "qhd,bthd->bhqt"
         logits = jnp.einsum(spec, q, keys)  # (B, H, Q, T)
@@ -178,8 +179,10 @@ class GroupedCrossAttention(nn.Module):
     Semantics: token t of group g is embedded e_t = x_t W_g + type_g (D); keys e_t Wk + bk and values
     e_t Wv + bv (no LayerNorm on the token side); masked softmax over the tokens of all groups; output Dense.
     Computed folded: logits = [x_t, 1] (W'_g Wk q) and sum_t w_t values = (sum_t w_t [x_t, 1]) W'_g Wv, so
-    the (B, T, D) embeddings, keys and values are never built; per token the work is F_g-wide, not D-wide
-    (about 5x less on the default observation). Equal to the unfolded form up to float rounding.
+    the (B, T, D) embeddings, keys and values are never built and the per-token work is F_g-wide, not
+    D-wide (measured ~2x faster forward+backward than the unfolded form on the default observation).
+    Equal to the unfolded form up to float rounding (tested). The price: no LayerNorm on the tokens
+    (it would not fold); the observation features are already normalised.
 
     latents (Q, D) shared by the batch; groups: sequence of (x (B, T_g, F_g), mask (B, T_g)) with masked
     features already zeroed -> (B, Q, D); a row whose keys are all masked gets 0 before the output Dense.
@@ -188,7 +191,7 @@ class GroupedCrossAttention(nn.Module):
     num_heads: int
 
     @nn.compact
-    def __call__(self, latents: jnp.ndarray, groups) -> jnp.ndarray:
+    def __call__(self, latents: jnp.ndarray, groups: Sequence[tuple[jnp.ndarray, jnp.ndarray]]) -> jnp.ndarray:
         num_latents, dim = latents.shape
         heads, head_dim = self.num_heads, dim // self.num_heads
         batch = groups[0][0].shape[0]
@@ -199,27 +202,27 @@ class GroupedCrossAttention(nn.Module):
         value_kernel = self.param("value_kernel", lecun, (dim, dim))
         value_bias = self.param("value_bias", zeros, (dim,))
         types = self.param("type_embedding", _EMBED_INIT, (len(groups), dim))  # (G, D)
-        logits, inputs, value_kernels = [], [], []
+        parts = []
         for i, (x, mask) in enumerate(groups):
             embed = self.param(f"embed_{i}", lecun, (x.shape[-1], dim))  # (F_g, D)
             embed = jnp.concatenate([embed, types[i][None]], 0)  # (F_g + 1, D): the type rides on a constant 1
             x = jnp.concatenate([x, jnp.ones(x.shape[:-1] + (1,), x.dtype)], -1)  # (B, T_g, F_g + 1)
             to_key = _fold(embed, key_kernel, key_bias).reshape(-1, heads, head_dim)  # (F_g + 1, H, d): [x, 1] -> key
-            logit_kernel = jnp.einsum("fhd,qhd->fqh", to_key, query)  # (F_g + 1, Q, H)
-            logit = _matmul_2d(x, logit_kernel.reshape(-1, num_latents * heads))  # (B, T_g, Q * H)
-            logits.append(jnp.where(mask[..., None], logit, NEG_LOGIT))
-            inputs.append(x)
-            value_kernels.append(_fold(embed, value_kernel, value_bias))  # (F_g + 1, D): [x, 1] -> value
+            logit_kernel = jnp.einsum("fhd,qhd->fqh", to_key, query).reshape(-1, num_latents * heads)  # (F_g + 1, Q H)
+            parts.append((x, mask, logit_kernel, _fold(embed, value_kernel, value_bias)))  # last: (F_g + 1, D)
+        logits = [jnp.where(mask[..., None], _matmul_2d(x, kernel), NEG_LOGIT)  # (B, T_g, Q * H)
+                  for x, mask, kernel, _ in parts]
         # softmax across all groups without concatenating them: shared max, shared normaliser
         top = jax.lax.stop_gradient(functools.reduce(jnp.maximum, [jnp.max(lg, 1, keepdims=True) for lg in logits]))
         pooled, total = [], 0.0
-        for logit, x, (_, mask) in zip(logits, inputs, groups):
+        for logit, (x, mask, _, _) in zip(logits, parts):
             weight = jnp.where(mask[..., None], jnp.exp(logit - top), 0.0)  # (B, T_g, Q * H), exactly 0 if masked
             total = total + jnp.sum(weight, 1)  # (B, Q * H)
             pooled.append(jnp.einsum("btk,btf->bkf", weight, x))  # (B, Q * H, F_g + 1): weighted token features
         pooled = jnp.concatenate(pooled, -1) / jnp.maximum(total, 1e-30)[..., None]  # (B, Q * H, F_all); 0 if empty
         pooled = pooled.reshape(batch * num_latents, heads, -1).transpose(1, 0, 2)  # (H, B * Q, F_all)
-        to_value = jnp.concatenate(value_kernels, 0).reshape(-1, heads, head_dim).transpose(1, 0, 2)  # (H, F_all, d)
+        to_value = jnp.concatenate([kernel for *_, kernel in parts], 0)  # (F_all, D): same row order as pooled
+        to_value = to_value.reshape(-1, heads, head_dim).transpose(1, 0, 2)  # (H, F_all, d)
         values = jax.lax.dot_general(pooled, to_value, (((2,), (1,)), ((0,), (0,))))  # (H, B * Q, d)
         values = values.transpose(1, 0, 2).reshape(batch, num_latents, dim)  # (B, Q, D)
         return Dense(dim, name="out")(values)
@@ -235,7 +238,7 @@ class GroupedCrossAttentionBlock(nn.Module):
     ff_multiplier: int = 2
 
     @nn.compact
-    def __call__(self, latents: jnp.ndarray, groups) -> jnp.ndarray:
+    def __call__(self, latents: jnp.ndarray, groups: Sequence[tuple[jnp.ndarray, jnp.ndarray]]) -> jnp.ndarray:
         attended = GroupedCrossAttention(self.num_heads, name="attn")(nn.LayerNorm(name="norm_query")(latents), groups)
         x = latents + attended  # (B, Q, D)
         return x + FeedForward(self.ff_multiplier, name="ff")(nn.LayerNorm(name="norm_ff")(x))
