@@ -97,37 +97,46 @@ def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
 
 @main.command()
 @click.option("--policy", required=True,
-              help="expert, constant, or a training run directory (its latest checkpoint).")
+              help="Comma-separated policies: expert, constant, idm, pdm, random, or training run directories "
+                   "(their latest checkpoint). Several give one comparison table.")
 @click.option("--data", default=None, help="Shard directory, file or glob (default for a run: its held-out split).")
 @click.option("--mode", default="non_reactive", show_default=True, help="Evaluation mode (non_reactive).")
 @click.option("--batch-size", type=click.IntRange(1), default=8, show_default=True)
 @click.option("--num-scenarios", type=click.IntRange(1), default=None, help="Evaluate only the first N.")
 @click.option("--num-objects", type=click.IntRange(1), default=64, show_default=True, help="Object slots loaded.")
-@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-@click.option("--out", type=click.Path(dir_okay=False), default=None, help="Also write the summary JSON here.")
-def evaluate(policy, data, mode, batch_size, num_scenarios, num_objects, as_json, out):
-    """Closed-loop evaluation: accuracy, nuPlan and V-Max scores, mean of every metric."""
-    from vmax_sim.data import DataConfig
-    from vmax_sim.evaluation import evaluate as run_evaluation
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the policies' random keys.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary (or the summaries) as JSON.")
+@click.option("--out", type=click.Path(), default=None,
+              help="A file ending in .json: the summary JSON (one policy). Otherwise a directory for table.md, "
+                   "table.csv, episodes-<policy>.csv and summaries.json.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def evaluate(policy, data, mode, batch_size, num_scenarios, num_objects, seed, as_json, out, quiet):
+    """Closed-loop evaluation: accuracy, nuPlan and V-Max scores; several policies give one comparison table."""
     from vmax_sim.evaluation import format_summary
+    from vmax_sim.evaluation.report import compare_policies, format_markdown, split_policies, write_report
 
     try:
-        if policy in ("expert", "constant"):
-            if not data:
-                _fail("--data is required for the expert and constant policies")
-            config = DataConfig(path=data, batch_size=batch_size, num_objects=num_objects)
-            result = run_evaluation(policy, config, mode=mode, num_scenarios=num_scenarios)
+        entries = split_policies(policy)
+        runs = compare_policies(entries, data, mode, num_scenarios=num_scenarios, batch_size=batch_size,
+                                num_objects=num_objects, seed=seed, progress=not quiet and not as_json,
+                                print_fn=lambda line: click.echo(line, err=True))
+        summaries = {run.name: run.result.summary for run in runs}
+        if len(runs) == 1:
+            text = json.dumps(runs[0].result.summary, indent=2)
+            click.echo(text if as_json else format_summary(runs[0].result.summary))
         else:
-            from vmax_sim.evaluation.trained import evaluate_run
-
-            result = evaluate_run(policy, data, mode=mode, num_scenarios=num_scenarios, batch_size=batch_size)
+            text = json.dumps(summaries, indent=2)
+            click.echo(text if as_json else format_markdown(runs))
+        if out and out.endswith(".json"):
+            Path(out).parent.mkdir(parents=True, exist_ok=True)
+            Path(out).write_text(text)
+        elif out:
+            write_report(out, runs)
+            (Path(out) / "summaries.json").write_text(json.dumps(summaries, indent=2))
+            if not as_json:
+                click.echo(f"wrote {out}/table.md, table.csv, summaries.json and episodes-<policy>.csv")
     except (InputError, ValueError, OSError) as error:
         _fail(str(error).splitlines()[0] if str(error) else type(error).__name__)
-    text = json.dumps(result.summary, indent=2)
-    click.echo(text if as_json else format_summary(result.summary))
-    if out:
-        Path(out).parent.mkdir(parents=True, exist_ok=True)
-        Path(out).write_text(text)
 
 
 @main.command()

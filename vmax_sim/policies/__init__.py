@@ -5,13 +5,18 @@ unbatched state (the rollout vmaps it); `idm_action` / `pdm_action` are the pure
 """
 
 from vmax_sim.policies.idm import IDMConfig, idm_acceleration, idm_action, idm_policy, pure_pursuit_curvature
+from vmax_sim.policies.pdm import PDMConfig, pdm_action, pdm_plan, pdm_policy
 from vmax_sim.policies.random import random_policy
 
 __all__ = [
     "IDMConfig",
+    "PDMConfig",
     "idm_acceleration",
     "idm_action",
     "idm_policy",
+    "pdm_action",
+    "pdm_plan",
+    "pdm_policy",
     "pure_pursuit_curvature",
     "random_policy",
 ]

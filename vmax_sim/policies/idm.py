@@ -4,9 +4,10 @@ Longitudinal (Treiber, Hennecke & Helbing 2000):
     a_idm = a [1 - (v / v0)^delta - (s* / s)^2],   s* = s0 + max(0, v T + v (v - v_lead) / (2 sqrt(a b)))
 with v0 the desired speed (the lane's speed limit, lowered ahead of bends), s the bumper-to-bumper
 gap to the leader along the path and v_lead its speed along the path. The leader is the nearest
-object ahead whose box reaches into the lane corridor around the path, or the stop point of a red
-(or stoppable yellow) light on the route. Lateral: pure pursuit (Coulter 1992) on a point of the
-path a speed-dependent distance ahead, curvature = 2 y / d^2 in the SDC's frame.
+object ahead whose box reaches into the lane corridor around the path, the stop point of a red
+(or stoppable yellow) light on the route, or a stop sign until the SDC has stopped there and the
+way is clear. Lateral: pure pursuit (Coulter 1992) on a point of the path a speed-dependent
+distance ahead, curvature = 2 y / d^2 in the SDC's frame. See docs/baselines.md.
 
 Everything works on one unbatched state and is jittable; the rollout vmaps it over scenarios.
 """
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import flax.struct
 import jax
 import jax.numpy as jnp
 
@@ -31,12 +33,15 @@ from vmax_sim.policies.route import (
     allowed_speed_profile,
     choose_route,
     current_lane_id,
+    ego_arc_on,
     ego_now,
     lane_speed_limit,
     light_stop_arc,
     objects_now,
+    path_conflict,
     point_at,
-    project,
+    stop_sign_arc,
+    stopped_recently,
 )
 
 
@@ -55,15 +60,21 @@ class IDMConfig:
     lane_half_width: float = 1.75  # m; an object is in the corridor when |lateral| < this + its half width
     bend_lateral_accel: float = 2.0  # m/s^2 accepted in bends: v <= sqrt(this / curvature)
     bend_decel: float = 1.5  # m/s^2 used to slow down ahead of a bend
+    bend_preview_s: float = 1.0  # s; the bend speed is read this far ahead (IDM lags a falling desired speed)
     caution_decel: float = 3.0  # m/s^2; stop at a yellow light only when braking this hard suffices
     stop_states: tuple[int, ...] = (TL_ARROW_STOP, TL_STOP, TL_FLASHING_STOP)  # the red-light metric's states
     caution_states: tuple[int, ...] = (TL_ARROW_CAUTION, TL_CAUTION)
     light_lateral: float = 2.5  # m, a stop point this close to the path is on it
     lane_match_distance: float = 3.0  # m, lanes further away give no speed limit / light
-    lookahead_min: float = 4.0  # m, pure-pursuit lookahead at standstill
+    stop_speed: float = 0.3  # m/s; below it the SDC has come to a stop at a stop sign
+    stop_memory_s: float = 3.0  # s; a stop this recent, within stop_release_gap of the sign, counts
+    stop_release_gap: float = 5.0  # m from the front bumper to the sign
+    yield_zone: float = 20.0  # m of path past a stop sign that must stay clear...
+    yield_horizon: float = 3.0  # s ...of objects driving at constant velocity for this long
+    lookahead_min: float = 3.0  # m, pure-pursuit lookahead at standstill
     lookahead_time: float = 0.6  # s, lookahead grows by speed x this
     lookahead_max: float = 25.0  # m
-    dt: float = DT  # s, used only to stop at zero speed instead of reversing
+    dt: float = DT  # s, the simulator step (stopping at zero speed, the stop-sign memory)
 
     def __post_init__(self):
         for name in ("max_accel", "comfort_decel", "time_headway", "delta", "max_decel", "bend_lateral_accel",
@@ -86,11 +97,11 @@ def idm_acceleration(speed: jax.Array, desired_speed: jax.Array, gap: jax.Array,
     return config.max_accel * (free - interaction)
 
 
-def bounded_acceleration(accel: jax.Array, speed: jax.Array, config: IDMConfig) -> jax.Array:
-    """Clip to [-max_decel, max_accel] and never brake below zero speed within one step. (...) -> (...)."""
+def bounded_acceleration(accel: jax.Array, speed: jax.Array, config: IDMConfig, dt: float) -> jax.Array:
+    """Clip to [-max_decel, max_accel] and never brake below zero speed within one step of dt. (...) -> (...)."""
     accel = jnp.clip(accel, -config.max_decel, config.max_accel)
-    accel = jnp.maximum(accel, -jnp.maximum(speed, 0.0) / config.dt)  # brake at most down to zero speed
-    accel = jnp.where(speed < 0.0, -speed / config.dt, accel)  # reversing (never planned): back to zero
+    accel = jnp.maximum(accel, -jnp.maximum(speed, 0.0) / dt)  # brake at most down to zero speed
+    accel = jnp.where(speed < 0.0, -speed / dt, accel)  # reversing (never planned): back to zero
     return jnp.clip(accel, *ACCEL_BOUNDS)
 
 
@@ -123,40 +134,73 @@ def steer(path: RoutePath, ego: Ego, ego_arc: jax.Array, offset: jax.Array, conf
     return jnp.clip(pure_pursuit_curvature(ego.xy, ego.yaw, target), *CURVATURE_BOUNDS)
 
 
-def desired_speed(state: SimulatorState, path: RoutePath, ego: Ego, ego_arc: jax.Array,
-                  config: IDMConfig) -> tuple[jax.Array, jax.Array]:
-    """The speed limit (default when unknown) times speed_factor, and the bend-speed profile of the path.
+@flax.struct.dataclass
+class Scene:
+    """What both planners perceive at one step (IDM drives on it directly, PDM simulates proposals on it)."""
 
-    -> v0 () and the profile (M,) for `allowed_speed`.
-    """
-    limit = lane_speed_limit(state, ego.xy, ego.yaw, config.lane_match_distance)
-    v_limit = jnp.where(limit > 0.0, limit, config.default_speed) * config.speed_factor
-    profile = allowed_speed_profile(path, config.bend_lateral_accel, config.bend_decel)
-    return v_limit, profile
+    ego: Ego
+    path: RoutePath
+    ego_arc: jax.Array  # () float32, the SDC's arc along the path
+    ego_lateral: jax.Array  # () float32, its signed offset from the path (+ left)
+    objects: Objects  # (N,) every other object, projected on the path
+    stop_arc: jax.Array  # () float32, arc of the point the front bumper must stop before (inf: none)
+    speed_limit: jax.Array  # () float32, m/s, the lane's limit (-1 unknown)
+    desired_speed: jax.Array  # () float32, m/s, speed_factor x (the limit, or default_speed when unknown)
+    bend_profile: jax.Array  # (M,) float32, `allowed_speed_profile` of the path
 
 
-def stop_gap(state: SimulatorState, path: RoutePath, ego: Ego, ego_arc: jax.Array, config: IDMConfig) -> jax.Array:
-    """Gap from the front bumper to the stop point of a light the SDC must stop at (inf if none). ()"""
+def stop_arc(state: SimulatorState, path: RoutePath, ego: Ego, ego_arc: jax.Array, objects: Objects,
+             config: IDMConfig) -> jax.Array:
+    """Arc the front bumper must stop before (inf if none): a red light's stop point, or a stop sign until
+    the SDC has stopped there and no moving object will cross its path soon. ()"""
     own_lane = current_lane_id(state, ego.xy, ego.yaw, config.lane_match_distance)
-    stop_arc = light_stop_arc(state, path, ego, own_lane, config.stop_states, config.caution_states,
-                              config.caution_decel, config.light_lateral)
-    return stop_arc - ego_arc - 0.5 * ego.length
+    light_arc = light_stop_arc(state, path, ego, ego_arc, own_lane, config.stop_states, config.caution_states,
+                               config.caution_decel, config.light_lateral)
+    front = ego_arc + 0.5 * ego.length
+    sign_arc = stop_sign_arc(state, path, ego, ego_arc, config.lane_half_width)
+    has_stopped = stopped_recently(state, round(config.stop_memory_s / config.dt), config.stop_speed)
+    released = has_stopped & (sign_arc - front < config.stop_release_gap) & ~path_conflict(
+        path, objects, ego, front, config.yield_zone, config.yield_horizon, config.lane_half_width)
+    return jnp.minimum(light_arc, jnp.where(released, jnp.inf, sign_arc))
 
 
-def idm_action(state: SimulatorState, config: IDMConfig = IDMConfig()) -> jax.Array:
-    """The SDC's [acceleration m/s^2, curvature 1/m] under IDM + pure pursuit. One unbatched state -> (2,)."""
+def perceive(state: SimulatorState, config: IDMConfig, first_timestep: int) -> Scene:
+    """The route, the SDC on it, the objects, where to stop and how fast to go, from one unbatched state.
+
+    first_timestep: the episode's first step (EnvConfig.first_policy_timestep); the distance driven
+    since then tells where along a looping path the SDC is.
+    """
     ego = ego_now(state)
     path = choose_route(state, ego)
-    ego_arc = project(path, ego.xy[None])[0][0]
-    objects = objects_now(state, path)
-    gap, lead_speed = corridor_leader(objects, ego_arc, 0.0, 0.5 * ego.length, config.lane_half_width)
-    light_gap = stop_gap(state, path, ego, ego_arc, config)
-    v_limit, profile = desired_speed(state, path, ego, ego_arc, config)
-    v0 = jnp.minimum(v_limit, allowed_speed(path, profile, ego_arc, config.bend_decel))
-    accel = jnp.minimum(idm_acceleration(ego.speed, v0, gap, lead_speed, config),
-                        idm_acceleration(ego.speed, v0, light_gap, 0.0, config))
-    accel = bounded_acceleration(accel, ego.speed, config)
-    curvature = steer(path, ego, ego_arc, jnp.zeros(()), config)
+    ego_arc, ego_lateral = ego_arc_on(state, path, ego, first_timestep)
+    objects = objects_now(state, path, ego_arc)
+    limit = lane_speed_limit(state, ego.xy, ego.yaw, config.lane_match_distance)
+    return Scene(ego=ego, path=path, ego_arc=ego_arc, ego_lateral=ego_lateral, objects=objects,
+                 stop_arc=stop_arc(state, path, ego, ego_arc, objects, config), speed_limit=limit,
+                 desired_speed=jnp.where(limit > 0.0, limit, config.default_speed) * config.speed_factor,
+                 bend_profile=allowed_speed_profile(path, config.bend_lateral_accel, config.bend_decel))
+
+
+def idm_step_acceleration(scene: Scene, arc: jax.Array, speed: jax.Array, desired: jax.Array, gap: jax.Array,
+                          lead_speed: jax.Array, config: IDMConfig, dt: float) -> jax.Array:
+    """IDM towards min(desired, the bend speed bend_preview_s ahead of `arc`), behind the leader and before
+    the stop point, bounded. All (...) -> (...)."""
+    preview = arc + jnp.maximum(speed, 0.0) * config.bend_preview_s
+    v0 = jnp.minimum(desired, allowed_speed(scene.path, scene.bend_profile, preview, config.bend_decel))
+    stop_gap = scene.stop_arc - arc - 0.5 * scene.ego.length
+    accel = jnp.minimum(idm_acceleration(speed, v0, gap, lead_speed, config),
+                        idm_acceleration(speed, v0, stop_gap, 0.0, config))
+    return bounded_acceleration(accel, speed, config, dt)
+
+
+def idm_action(state: SimulatorState, config: IDMConfig = IDMConfig(), first_timestep: int = 10) -> jax.Array:
+    """The SDC's [acceleration m/s^2, curvature 1/m] under IDM + pure pursuit. One unbatched state -> (2,)."""
+    scene = perceive(state, config, first_timestep)
+    ego = scene.ego
+    gap, lead_speed = corridor_leader(scene.objects, scene.ego_arc, 0.0, 0.5 * ego.length, config.lane_half_width)
+    accel = idm_step_acceleration(scene, scene.ego_arc, ego.speed, scene.desired_speed, gap, lead_speed, config,
+                                  config.dt)
+    curvature = steer(scene.path, ego, scene.ego_arc, jnp.zeros(()), config)
     return jnp.stack([accel, curvature]).astype(jnp.float32)
 
 
@@ -178,6 +222,6 @@ def idm_policy(env, config: IDMConfig | None = None) -> Policy:
     config = config or IDMConfig()
 
     def action_fn(params, state, observation, key):
-        return as_env_action(env, state, idm_action(state, config))
+        return as_env_action(env, state, idm_action(state, config, env.config.first_policy_timestep))
 
     return Policy("idm", action_fn)

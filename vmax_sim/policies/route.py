@@ -11,13 +11,18 @@ import flax.struct
 import jax
 import jax.numpy as jnp
 
+from scenariomax.schema import RG_STOP_SIGN
 from vmax_sim.datatypes import SimulatorState
-from vmax_sim.dynamics.bicycle import heading_speed
-from vmax_sim.geometry.transforms import wrap_angle
+from vmax_sim.dynamics.bicycle import DT, heading_speed
+from vmax_sim.geometry.transforms import to_local_points, wrap_angle
 from vmax_sim.map_index import lane_candidates, nearest_lane, project_on_paths
 
 PATH_SPACING_M = 1.0  # spacing of the straight extension past the end of a path (shards: ~1 m)
 NO_PATH_BACK_M = 20.0  # without any SDC path, a straight one starting this far behind the SDC
+ARC_WINDOW_M = 10.0  # m of slack around the arc the SDC's driven distance predicts
+OBJECT_WINDOW_M = (-30.0, 150.0)  # m; objects and lights are projected on this part of the path around the SDC
+MIN_WINDOW_M = 24.0  # m, the narrowest projection window (the coarse search looks at every 10th point)
+ROUTE_TIE_M = 1.0  # m; on-route paths this much further than the nearest still count as nearest
 
 
 @flax.struct.dataclass
@@ -56,6 +61,7 @@ class Objects:
     half_along: jax.Array  # (N,) float32, half the box's extent along the path direction
     half_across: jax.Array  # (N,) float32, half the box's extent across it
     speed_along: jax.Array  # (N,) float32, velocity component along the path direction
+    yaw_rate: jax.Array  # (N,) float32, rad/s over the last step (0 where the previous step is invalid)
 
 
 def _now(values: jax.Array, timestep: jax.Array) -> jax.Array:
@@ -106,15 +112,32 @@ def smoothed_curvature(xy: jax.Array, arc: jax.Array, window: int = 5) -> tuple[
     return yaw, jnp.convolve(kappa, kernel, mode="same")
 
 
-def choose_route(state: SimulatorState, ego: Ego) -> RoutePath:
+def total_turning(xy: jax.Array, valid: jax.Array) -> jax.Array:
+    """Sum of absolute heading changes along each path, radians. (P, M, 2), (P, M) -> (P,)."""
+    d = jnp.diff(xy, axis=1)  # (P, M - 1, 2)
+    ok = valid[:, 1:] & valid[:, :-1] & (jnp.sum(d * d, -1) > 1e-4)
+    yaw = jnp.arctan2(d[..., 1], d[..., 0])
+    turn = jnp.abs(wrap_angle(jnp.diff(yaw, axis=1)))  # (P, M - 2)
+    return jnp.sum(jnp.where(ok[:, 1:] & ok[:, :-1], turn, 0.0), axis=1)
+
+
+def choose_route(state: SimulatorState, ego: Ego, tie_distance: float = ROUTE_TIE_M) -> RoutePath:
     """The on-route SDC path nearest the SDC (as the progress metrics choose it), else the nearest path,
-    else a straight line along the SDC's heading; extended straight past its end."""
+    else a straight line along the SDC's heading; extended straight past its end.
+
+    On-route paths within `tie_distance` of the nearest one count as equally near, and the one that
+    turns least in all wins: where several on-route paths share the logged part and fork after it,
+    the choice stays on one branch instead of flipping between them, and a path that loops a
+    roundabout once more before taking the logged exit loses to the one taking it directly.
+    """
     paths = state.sdc_paths
     proj = project_on_paths(paths.xy, paths.valid, paths.arc_length, ego.xy)
     has_points = jnp.any(paths.valid, axis=1)  # (P,)
     distance = jnp.where(has_points, proj.distance, jnp.inf)
     on_route = jnp.where(paths.on_route, distance, jnp.inf)
-    index = jnp.where(jnp.isfinite(jnp.min(on_route)), jnp.argmin(on_route), jnp.argmin(distance))
+    near = on_route <= jnp.min(on_route) + tie_distance
+    turning = jnp.where(near, total_turning(paths.xy, paths.valid), jnp.inf)
+    index = jnp.where(jnp.isfinite(jnp.min(on_route)), jnp.argmin(turning), jnp.argmin(distance))
     exists = jnp.any(has_points)
     heading = jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
     m = paths.x.shape[-1]
@@ -139,15 +162,23 @@ def point_at(path: RoutePath, arc: jax.Array, offset: jax.Array | float = 0.0) -
     return jnp.stack([x - offset * jnp.sin(yaw), y + offset * jnp.cos(yaw)], -1), yaw
 
 
-def project(path: RoutePath, points: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """Arc, signed lateral offset (+ left) and path heading at the projection of each point.
+def project(path: RoutePath, points: jax.Array, arc_min: jax.Array | float = -1e9,
+            arc_max: jax.Array | float = 1e9) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Arc, signed lateral offset (+ left) and path heading at the projection of each point on the part
+    of the path between arc_min and arc_max (the whole path when that part is shorter than 2 points).
 
-    points (Q, 2) -> (Q,), (Q,), (Q,).
+    A path that loops (a roundabout) passes near itself; the window keeps a point from snapping to
+    the wrong lap. points (Q, 2) -> (Q,), (Q,), (Q,).
     """
-    ones = jnp.ones(path.arc.shape, bool)[None]
+    # the coarse search looks at every 10th point: keep the window at least 2 x 10 m wide
+    middle = 0.5 * (arc_min + arc_max)
+    lo = jnp.minimum(arc_min, middle - MIN_WINDOW_M / 2)
+    hi = jnp.maximum(arc_max, middle + MIN_WINDOW_M / 2)
+    window = (path.arc >= lo) & (path.arc <= hi)
+    window = jnp.where(jnp.sum(window) >= 2, window, True)[None]  # (1, M)
 
     def one(p):
-        proj = project_on_paths(path.xy[None], ones, path.arc[None], p)
+        proj = project_on_paths(path.xy[None], window, path.arc[None], p)
         return proj.arc[0], proj.direction[0], proj.distance[0]
 
     arc, direction, distance = jax.vmap(one)(points)
@@ -159,20 +190,50 @@ def project(path: RoutePath, points: jax.Array) -> tuple[jax.Array, jax.Array, j
     return arc, lateral, jnp.arctan2(direction[:, 1], direction[:, 0])
 
 
-def objects_now(state: SimulatorState, path: RoutePath) -> Objects:
-    """Every object at the current step, projected on the route path (the SDC's slot is invalid)."""
+def travelled_distance(state: SimulatorState, first_timestep: int) -> jax.Array:
+    """Distance the SDC has driven since `first_timestep` (the episode's start). () float32"""
+    sim, t, i = state.sim_trajectory, state.timestep, sdc_slot(state)
+    xy = jnp.stack([sim.x[i], sim.y[i]], -1)  # (T, 2)
+    step = jnp.linalg.norm(jnp.diff(xy, axis=0), axis=-1)  # (T - 1,), step k -> k + 1
+    k = jnp.arange(1, xy.shape[0])
+    counted = (k > first_timestep) & (k <= t) & sim.valid[i, 1:] & sim.valid[i, :-1]
+    return jnp.sum(jnp.where(counted, step, 0.0))
+
+
+def ego_arc_on(state: SimulatorState, path: RoutePath, ego: Ego, first_timestep: int) -> tuple[jax.Array, jax.Array]:
+    """Arc and signed lateral offset (+ left) of the SDC on the path, searched near where its driven
+    distance puts it. -> (), () float32
+
+    The window runs from start arc + 0.6 x driven - 10 m to start arc + driven + 10 m, the start arc
+    being the projection of the SDC's position at `first_timestep` (a path starts at the SDC).
+    """
+    sim, i = state.sim_trajectory, sdc_slot(state)
+    start_xy = jnp.stack([sim.x[i, first_timestep], sim.y[i, first_timestep]])[None]
+    start_arc = project(path, start_xy)[0][0]
+    driven = travelled_distance(state, first_timestep)
+    arc, lateral, _ = project(path, ego.xy[None], start_arc + 0.6 * driven - ARC_WINDOW_M,
+                              start_arc + driven + ARC_WINDOW_M)
+    return arc[0], lateral[0]
+
+
+def objects_now(state: SimulatorState, path: RoutePath, ego_arc: jax.Array) -> Objects:
+    """Every object at the current step, projected on the route path near the SDC (the SDC's slot is invalid)."""
     sim, t = state.sim_trajectory, state.timestep
     now = jax.tree.map(lambda a: _now(a, t), sim)  # (N,) fields
+    before = jax.tree.map(lambda a: _now(a, jnp.maximum(t - 1, 0)), sim)
+    yaw_rate = jnp.where(before.valid & now.valid & (t > 0), wrap_angle(now.yaw - before.yaw) / DT, 0.0)
     boxes = jnp.stack([now.x, now.y, now.length, now.width, now.yaw], -1).astype(jnp.float32)
     vel = jnp.stack([now.vel_x, now.vel_y], -1).astype(jnp.float32)
     valid = now.valid & ~state.object_metadata.is_sdc
-    arc, lateral, path_yaw = project(path, boxes[:, :2])
+    arc, lateral, path_yaw = project(path, boxes[:, :2], ego_arc + OBJECT_WINDOW_M[0],
+                                     ego_arc + OBJECT_WINDOW_M[1])
     rel = wrap_angle(now.yaw - path_yaw)
     cos, sin = jnp.abs(jnp.cos(rel)), jnp.abs(jnp.sin(rel))
     return Objects(boxes=boxes, vel=vel, valid=valid, arc=arc, lateral=lateral,
                    half_along=0.5 * (now.length * cos + now.width * sin),
                    half_across=0.5 * (now.length * sin + now.width * cos),
-                   speed_along=vel[:, 0] * jnp.cos(path_yaw) + vel[:, 1] * jnp.sin(path_yaw))
+                   speed_along=vel[:, 0] * jnp.cos(path_yaw) + vel[:, 1] * jnp.sin(path_yaw),
+                   yaw_rate=yaw_rate.astype(jnp.float32))
 
 
 def lane_speed_limit(state: SimulatorState, xy: jax.Array, yaw: jax.Array, match_distance: float) -> jax.Array:
@@ -190,7 +251,7 @@ def current_lane_id(state: SimulatorState, xy: jax.Array, yaw: jax.Array, match_
     return jnp.where(lanes.distance[k] < match_distance, lanes.lane_id[k], -1)
 
 
-def light_stop_arc(state: SimulatorState, path: RoutePath, ego: Ego, own_lane: jax.Array,
+def light_stop_arc(state: SimulatorState, path: RoutePath, ego: Ego, ego_arc: jax.Array, own_lane: jax.Array,
                    stop_states: tuple[int, ...], caution_states: tuple[int, ...], caution_decel: float,
                    max_lateral: float) -> jax.Array:
     """Arc of the nearest stop point ahead of the SDC's front bumper that it must stop at, inf if none.
@@ -202,10 +263,9 @@ def light_stop_arc(state: SimulatorState, path: RoutePath, ego: Ego, own_lane: j
     t = state.timestep
     lights = jax.tree.map(lambda a: _now(a, t), state.log_traffic_light)  # (L,) fields
     stop_xy = jnp.stack([lights.x, lights.y], -1).astype(jnp.float32)
-    arc, lateral, _ = project(path, stop_xy)  # (L,)
+    arc, lateral, _ = project(path, stop_xy, ego_arc + OBJECT_WINDOW_M[0], ego_arc + OBJECT_WINDOW_M[1])  # (L,)
     on_route = jnp.any((lights.lane_ids[:, None] == path.lane_id[None]) & (path.lane_id[None] >= 0), axis=1)
     controls_us = (on_route | (lights.lane_ids == own_lane)) & (lights.lane_ids >= 0)
-    ego_arc = project(path, ego.xy[None])[0][0]
     ahead = arc - (ego_arc + 0.5 * ego.length)  # (L,) distance from the front bumper to the stop point
     speed = jnp.maximum(ego.speed, 0.0)
     can_stop = speed * speed <= 2.0 * caution_decel * jnp.maximum(ahead, 0.0)
@@ -228,3 +288,86 @@ def allowed_speed(path: RoutePath, profile: jax.Array, arc: jax.Array, decel: fl
     """Highest speed at `arc` from which every bend ahead is reached slowly enough. (...) -> (...)."""
     i = jnp.clip(jnp.searchsorted(path.arc, arc), 0, path.arc.shape[0] - 1)
     return jnp.sqrt(jnp.maximum(profile[i] - 2.0 * decel * arc, 0.0))
+
+
+def stop_sign_arc(state: SimulatorState, path: RoutePath, ego: Ego, ego_arc: jax.Array, max_lateral: float,
+                  max_ahead: float = 60.0, stop_sign_type: int = RG_STOP_SIGN) -> jax.Array:
+    """Arc of the nearest stop sign ahead of the SDC's front bumper on its path, inf if none. () float32
+
+    Stop signs are roadgraph points of `stop_sign_type`; one counts when it lies within `max_lateral`
+    of the path (a sign drawn on the lane's stop line, as the synthetic and many converted maps place
+    it; a sign at the kerbside further away is not seen). All R roadgraph points are scanned once.
+    """
+    rg = state.roadgraph_points
+    local = to_local_points(rg.xy, ego.xy, ego.yaw)  # (R, 2)
+    front = 0.5 * ego.length
+    candidate = rg.valid & (rg.types == stop_sign_type) & (local[:, 0] > front) & (local[:, 0] < max_ahead)
+    candidate &= jnp.abs(local[:, 1]) < 2.0 * max_lateral  # a cheap pre-filter before the path projection
+    k = jnp.argmin(jnp.where(candidate, local[:, 0], jnp.inf))
+    arc, lateral, _ = project(path, rg.xy[k][None], ego_arc, ego_arc + max_ahead)
+    ok = candidate[k] & (jnp.abs(lateral[0]) < max_lateral) & (arc[0] > ego_arc + front)
+    return jnp.where(ok, arc[0], jnp.inf)
+
+
+def stopped_recently(state: SimulatorState, window_steps: int, max_speed: float) -> jax.Array:
+    """The SDC's speed was below max_speed at some step of the last window_steps (now included). () bool"""
+    sim, t, i = state.sim_trajectory, state.timestep, sdc_slot(state)
+    speed = jnp.hypot(sim.vel_x[i], sim.vel_y[i])  # (T,)
+    steps = jnp.arange(speed.shape[0])
+    recent = (steps <= t) & (steps > t - window_steps) & sim.valid[i]
+    return jnp.any(recent & (speed < max_speed))
+
+
+def path_conflict(path: RoutePath, objects: Objects, ego: Ego, start_arc: jax.Array, zone_length: float,
+                  horizon: float, lane_half_width: float, min_speed: float = 0.5, num_times: int = 17,
+                  num_zone_points: int = 13) -> jax.Array:
+    """Some moving object, driving at constant velocity, comes within lane_half_width + its half width
+    of the path between start_arc and start_arc + zone_length within `horizon` seconds. Objects behind
+    the SDC driving its way (followers) do not count. Used to accept a gap after a stop sign. -> () bool.
+    """
+    zone_xy, _ = point_at(path, start_arc + jnp.linspace(0.0, zone_length, num_zone_points))  # (Z, 2)
+    times = jnp.linspace(0.0, horizon, num_times)  # (H,)
+    future = objects.boxes[:, None, :2] + objects.vel[:, None] * times[None, :, None]  # (N, H, 2)
+    gap = jnp.linalg.norm(future[:, :, None] - zone_xy[None, None], axis=-1)  # (N, H, Z)
+    reach = lane_half_width + 0.5 * objects.boxes[:, 3]  # (N,)
+    hits = jnp.any(gap < reach[:, None, None], axis=(1, 2))  # (N,)
+    heading = jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
+    speed = jnp.linalg.norm(objects.vel, axis=-1)
+    behind = (objects.boxes[:, :2] - ego.xy) @ heading < 0.0
+    same_way = objects.vel @ heading > 0.7 * speed
+    return jnp.any(hits & objects.valid & (speed > min_speed) & ~(behind & same_way))
+
+
+def lane_turn_rate(state: SimulatorState, xy: jax.Array, yaw: jax.Array, speed: jax.Array,
+                   match_distance: float, preview_time: float = 3.0, num_hops: int = 3) -> jax.Array:
+    """Yaw rate that keeps an object on its lane: speed x the lane's mean curvature over the next
+    `preview_time` seconds of travel (6 to 36 m), found by hopping along the lane `num_hops` times
+    (each hop re-projects on the lane, preferring the same lane id); 0 without a lane within
+    match_distance. xy (K, 2), yaw (K,), speed (K,) -> (K,) rad/s."""
+    def one(p, heading, v):
+        here = lane_candidates(state.map_index, p)
+        k = nearest_lane(here, heading)
+        found = here.distance[k] < match_distance
+        start_heading = jnp.arctan2(here.dir_y[k], here.dir_x[k])
+        reach = jnp.clip(jnp.abs(v) * preview_time, 6.0, 36.0)
+        hop = reach / num_hops
+
+        def step(carry, _):
+            point, lane_heading, lane_id, turned, ok = carry
+            ahead = lane_candidates(state.map_index, point + hop * jnp.stack([jnp.cos(lane_heading),
+                                                                               jnp.sin(lane_heading)]))
+            same = (ahead.lane_id == lane_id) & ahead.valid
+            j = nearest_lane(ahead.replace(distance=jnp.where(same, ahead.distance, ahead.distance + 5.0)),
+                             lane_heading)
+            new_heading = jnp.arctan2(ahead.dir_y[j], ahead.dir_x[j])
+            turned = turned + wrap_angle(new_heading - lane_heading)
+            ok = ok & (ahead.distance[j] < match_distance)
+            return (jnp.stack([ahead.closest_x[j], ahead.closest_y[j]]), new_heading, ahead.lane_id[j], turned,
+                    ok), None
+
+        start = (jnp.stack([here.closest_x[k], here.closest_y[k]]), start_heading, here.lane_id[k],
+                 jnp.zeros(()), found)
+        (_, _, _, turned, ok), _ = jax.lax.scan(step, start, None, length=num_hops)
+        return jnp.where(ok, v * turned / reach, 0.0)
+
+    return jax.vmap(one)(xy, yaw, speed)

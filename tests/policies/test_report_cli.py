@@ -1,0 +1,61 @@
+"""The comparison of several policies: table rows and columns, report files, the CLI."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from cli.vmax_cli import main
+from vmax_sim.evaluation.report import TABLE_ROWS, compare_policies, format_markdown, table_csv, write_report
+
+
+@pytest.fixture(scope="module")
+def runs(policy_shards):
+    return compare_policies(["expert", "idm"], str(policy_shards), batch_size=2, num_objects=8, progress=False)
+
+
+def test_comparison_table_has_the_benchmark_rows_and_one_column_per_policy(runs):
+    assert [run.name for run in runs] == ["expert", "idm"]
+    assert runs[0].result.scenario_ids == ("cruise", "brake", "lead", "red")
+    lines = format_markdown(runs).splitlines()
+    assert lines[0] == "| Metric (%) | expert | idm |"
+    labels = [line.split("|")[1].strip() for line in lines[2:2 + len(TABLE_ROWS)]]
+    assert labels == [label for label, _ in TABLE_ROWS]
+    assert labels[0] == "Accuracy" and labels[-2:] == ["nuPlan score", "V-Max score"]
+    # the logged SDC of "red" runs its red light (the expert replays it), IDM stops
+    assert "| Accuracy | 75.00 | 100.00 |" in lines and "| Red light | 25.00 | 0.00 |" in lines
+    rows = list(csv.reader(table_csv(runs).splitlines()))
+    assert rows[0] == ["metric", "expert", "idm"] and len(rows) == 1 + len(TABLE_ROWS) + 2
+    assert rows[-2] == ["episodes", "4", "4"]
+
+
+def test_report_files(runs, tmp_path):
+    paths = write_report(tmp_path / "report", runs)
+    assert sorted(p.name for p in paths) == ["episodes-expert.csv", "episodes-idm.csv", "table.csv", "table.md"]
+    episodes = list(csv.DictReader((tmp_path / "report" / "episodes-idm.csv").open()))
+    assert [row["scenario_id"] for row in episodes] == ["cruise", "brake", "lead", "red"]
+    assert {"vmax_score", "overlap", "ego_progress", "accurate"} <= set(episodes[0])
+
+
+def test_unknown_entries_and_missing_data_are_one_line_errors(tmp_path):
+    with pytest.raises(ValueError, match="neither one of"):
+        compare_policies(["expert", "idmm"], str(tmp_path), progress=False)
+    result = CliRunner().invoke(main, ["evaluate", "--policy", "idm,pdm"])
+    assert result.exit_code == 2 and result.output.startswith("error: --data is required")
+    assert len(result.output.strip().splitlines()) == 1
+
+
+def test_cli_compares_two_policies_and_writes_the_report(policy_shards, tmp_path):
+    out = tmp_path / "cmp"
+    args = ["evaluate", "--policy", "expert, idm", "--data", str(policy_shards), "--num-objects", "8",
+            "--batch-size", "2", "--num-scenarios", "3", "--out", str(out)]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    assert "| Metric (%) | expert | idm |" in result.output and "| V-Max score |" in result.output
+    assert (out / "table.md").read_text().startswith("| Metric (%) | expert | idm |")
+    summaries = json.loads((out / "summaries.json").read_text())
+    assert set(summaries) == {"expert", "idm"} and summaries["idm"]["num_episodes"] == 3
+    assert len((out / "episodes-expert.csv").read_text().splitlines()) == 1 + 3

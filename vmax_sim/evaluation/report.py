@@ -1,0 +1,243 @@
+"""Several policies evaluated on the same scenarios, and the comparison table of the V-Max benchmark.
+
+`compare_policies` streams the scenarios once: each host batch is converted once and every named
+policy runs on it (one compilation per policy), so N policies cost one pass of data loading.
+Training run directories are evaluated by `vmax_sim.evaluation.trained.evaluate_run` with the
+run's own observation and environment settings. `format_markdown` / `table_csv` lay the results
+out as the V-Max paper's benchmark table (rows = metrics, columns = policies, values in %).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import math
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from scenariomax.sources.base import InputError
+from vmax_sim.data import DataConfig
+from vmax_sim.evaluation.evaluate import (
+    EvaluationResult,
+    PreparedBatches,
+    _batches,
+    _check_mode,
+    _summary,
+    evaluate,
+)
+from vmax_sim.evaluation.policies import POLICY_NAMES
+
+# (row label, where the value sits in an evaluation summary: a top-level key or a metric mean)
+TABLE_ROWS: tuple[tuple[str, str], ...] = (
+    ("Accuracy", "accuracy"),
+    ("Collision (overlap)", "overlap"),
+    ("Off-road", "offroad"),
+    ("Red light", "red_light"),
+    ("At-fault collision", "at_fault_collision"),
+    ("Progress (ego_progress)", "ego_progress"),
+    ("Progress ratio", "progress_ratio"),
+    ("Making progress", "making_progress"),
+    ("Driving direction", "driving_direction"),
+    ("TTC within bound", "ttc_within_bound"),
+    ("Speed-limit compliance", "speed_limit_compliance"),
+    ("Multiple lanes", "multiple_lanes_score"),
+    ("Comfort", "comfort"),
+    ("Accuracy at-fault", "accuracy_at_fault"),
+    ("nuPlan score", "nuplan_score"),
+    ("V-Max score", "vmax_score"),
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class PolicyRun:
+    """One column of the comparison: a policy's evaluation and how long its warm batches took."""
+
+    name: str
+    result: EvaluationResult
+    warm_seconds: float  # wall time of every batch but the first (which compiles); nan when unknown
+    warm_episodes: int  # episodes in those batches
+
+    @property
+    def episodes_per_second(self) -> float:
+        if self.warm_episodes == 0 or not math.isfinite(self.warm_seconds) or self.warm_seconds <= 0:
+            return math.nan
+        return self.warm_episodes / self.warm_seconds
+
+
+def summary_value(summary: dict, key: str) -> float | None:
+    """A score (top-level key) or the mean of an episode metric from an evaluation summary."""
+    value = summary[key] if key in summary else summary["metrics"].get(key)
+    return None if value is None else float(value)
+
+
+def _unique_names(names: Sequence[str]) -> list[str]:
+    seen: dict[str, int] = {}
+    out = []
+    for name in names:
+        seen[name] = seen.get(name, 0) + 1
+        out.append(name if seen[name] == 1 else f"{name}#{seen[name]}")
+    return out
+
+
+def split_policies(text: str) -> list[str]:
+    """'expert, idm,runs/x' -> ['expert', 'idm', 'runs/x'] (one-line error when empty)."""
+    entries = [part.strip() for part in text.split(",") if part.strip()]
+    if not entries:
+        raise ValueError("--policy needs at least one policy name or run directory")
+    return entries
+
+
+def is_run_directory(entry: str) -> bool:
+    """A policy entry that is not a policy name but an existing directory (a training run)."""
+    return entry not in POLICY_NAMES and Path(entry).is_dir()
+
+
+def check_entries(entries: Sequence[str]) -> None:
+    for entry in entries:
+        if entry not in POLICY_NAMES and not Path(entry).is_dir():
+            raise ValueError(f"unknown policy {entry!r}: neither one of {', '.join(POLICY_NAMES)} "
+                             "nor a training run directory")
+
+
+def compare_policies(entries: Sequence[str], data: str | None, mode: str = "non_reactive", *,
+                     num_scenarios: int | None = None, batch_size: int = 8, num_objects: int = 64, seed: int = 0,
+                     progress: bool = True, print_fn: Callable[[str], None] = print) -> list[PolicyRun]:
+    """Evaluates every entry (a POLICY_NAMES name or a training run directory) on the same scenarios.
+
+    Named policies share one pass over `data` (each batch converted once, then run by every policy);
+    run directories go through `evaluate_run` (default data: the run's held-out split). A tqdm bar
+    counts the batches when `progress`. Returns the columns in the order given.
+    """
+    _check_mode(mode)
+    check_entries(entries)
+    named = [entry for entry in entries if not is_run_directory(entry)]
+    runs: dict[int, PolicyRun] = {}
+    if named:
+        if not data:
+            raise InputError("--data is required for the policies " + ", ".join(sorted(set(named))))
+        config = DataConfig(path=data, batch_size=batch_size, num_objects=num_objects)
+        for index, run in zip([i for i, e in enumerate(entries) if e in named],
+                              _evaluate_named(named, config, mode, num_scenarios, seed, progress)):
+            runs[index] = run
+    for index, entry in enumerate(entries):
+        if index in runs:
+            continue
+        from vmax_sim.evaluation.trained import evaluate_run
+
+        print_fn(f"evaluating the run {entry} ...")
+        start = time.perf_counter()
+        result = evaluate_run(entry, data, mode=mode, num_scenarios=num_scenarios, batch_size=batch_size)
+        runs[index] = PolicyRun(result.summary["policy"], result, time.perf_counter() - start,
+                                result.summary["num_episodes"])  # includes compilation
+    ordered = [runs[i] for i in range(len(entries))]
+    names = _unique_names([run.name for run in ordered])
+    return [dataclasses.replace(run, name=name) for run, name in zip(ordered, names)]
+
+
+def _evaluate_named(names: Sequence[str], config: DataConfig, mode: str, num_scenarios: int | None, seed: int,
+                    progress: bool) -> list[PolicyRun]:
+    total = None if num_scenarios is None else math.ceil(num_scenarios / config.batch_size)
+    batches = _batches(config, config, num_scenarios)
+    if progress:
+        from tqdm import tqdm
+
+        batches = tqdm(batches, total=total, unit="batch", desc="evaluating " + ",".join(names), leave=False,
+                       disable=None)  # None: only on a terminal
+    parts: list[list[EvaluationResult]] = [[] for _ in names]
+    seconds = [0.0 for _ in names]
+    warm = [0 for _ in names]
+    for number, batch in enumerate(batches):
+        prepared = PreparedBatches(batches=(batch,), data_config=config)
+        for i, name in enumerate(names):
+            start = time.perf_counter()
+            part = evaluate(name, prepared, mode, seed=seed * 1_000_003 + number)
+            if number > 0:  # the first batch compiles
+                seconds[i] += time.perf_counter() - start
+                warm[i] += batch[2]
+            parts[i].append(part)
+    if not parts[0]:
+        raise InputError(f"{config.path}: no scenarios to evaluate")
+    return [PolicyRun(name, _merge(name, mode, results), seconds[i] if warm[i] else math.nan, warm[i])
+            for i, (name, results) in enumerate(zip(names, parts))]
+
+
+def _merge(name: str, mode: str, parts: Sequence[EvaluationResult]) -> EvaluationResult:
+    episodes = {key: np.concatenate([p.episodes[key] for p in parts]) for key in parts[0].episodes}
+    ids = tuple(sid for p in parts for sid in p.scenario_ids)
+    return EvaluationResult(summary=_summary(episodes, name, mode), episodes=episodes, scenario_ids=ids)
+
+
+def comparison_rows(runs: Sequence[PolicyRun]) -> list[tuple[str, list[float | None]]]:
+    """[(row label, [value in % per policy])] in TABLE_ROWS order."""
+    rows = []
+    for label, key in TABLE_ROWS:
+        values = [summary_value(run.result.summary, key) for run in runs]
+        rows.append((label, [None if v is None else 100.0 * v for v in values]))
+    return rows
+
+
+def _cell(value: float | None) -> str:
+    return "n/a" if value is None or not math.isfinite(value) else f"{value:.2f}"
+
+
+def format_markdown(runs: Sequence[PolicyRun]) -> str:
+    """The comparison as a Markdown table (values in %), with episodes and throughput below it."""
+    header = ["Metric (%)"] + [run.name for run in runs]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for label, values in comparison_rows(runs):
+        lines.append("| " + " | ".join([label] + [_cell(v) for v in values]) + " |")
+    episodes = ", ".join(f"{run.name}: {run.result.summary['num_episodes']}" for run in runs)
+    speed = ", ".join(f"{run.name}: {_speed(run)}" for run in runs)
+    lines += ["", f"episodes: {episodes}", f"episodes/s (after the first batch, which compiles): {speed}"]
+    return "\n".join(lines)
+
+
+def _speed(run: PolicyRun) -> str:
+    value = run.episodes_per_second
+    return "n/a" if not math.isfinite(value) else f"{value:.2f}"
+
+
+def table_csv(runs: Sequence[PolicyRun]) -> str:
+    """The comparison as CSV: metric, then one column per policy (values in %)."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["metric"] + [run.name for run in runs])
+    for label, values in comparison_rows(runs):
+        writer.writerow([label] + ["" if v is None else f"{v:.4f}" for v in values])
+    writer.writerow(["episodes"] + [run.result.summary["num_episodes"] for run in runs])
+    writer.writerow(["episodes_per_second"] + [f"{run.episodes_per_second:.4f}" for run in runs])
+    return buffer.getvalue()
+
+
+def episodes_csv(result: EvaluationResult) -> str:
+    """One row per episode: scenario id and every episode metric."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    keys = sorted(result.episodes)
+    writer.writerow(["scenario_id"] + keys)
+    for i, scenario_id in enumerate(result.scenario_ids):
+        writer.writerow([scenario_id] + [f"{float(result.episodes[k][i]):.6g}" for k in keys])
+    return buffer.getvalue()
+
+
+def _file_name(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_.#@" else "_" for c in name)
+
+
+def write_report(out_dir: str | Path, runs: Sequence[PolicyRun]) -> list[Path]:
+    """Writes table.md, table.csv and episodes-<policy>.csv (one per policy) into out_dir. -> paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = {"table.md": format_markdown(runs) + "\n", "table.csv": table_csv(runs)}
+    for run in runs:
+        files[f"episodes-{_file_name(run.name)}.csv"] = episodes_csv(run.result)
+    paths = []
+    for name, text in files.items():
+        path = out / name
+        path.write_text(text)
+        paths.append(path)
+    return paths
