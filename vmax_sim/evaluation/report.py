@@ -99,6 +99,8 @@ def is_run_directory(entry: str) -> bool:
 def check_entries(entries: Sequence[str]) -> None:
     for entry in entries:
         if entry not in POLICY_NAMES and not Path(entry).is_dir():
+            if "/" in entry or "\\" in entry:  # meant as a path
+                raise ValueError(f"{entry}: not a training run directory (no such folder)")
             raise ValueError(f"unknown policy {entry!r}: neither one of {', '.join(POLICY_NAMES)} "
                              "nor a training run directory")
 
