@@ -41,6 +41,8 @@ def _fresh(folder: Path) -> None:
 
 def comparison_table(summaries: dict[str, dict]) -> str:
     """Markdown table: one column per policy, the four scores and the failure rates as rows."""
+    from vmax_sim.evaluation.report import summary_value
+
     rows = [("accuracy", "accuracy"), ("V-Max score", "vmax_score"), ("nuPlan score", "nuplan_score"),
             ("collision", "overlap"), ("off-road", "offroad"), ("red light", "red_light"),
             ("progress", "ego_progress"), ("comfort", "comfort")]
@@ -49,8 +51,7 @@ def comparison_table(summaries: dict[str, dict]) -> str:
     for label, key in rows:
         values = []
         for name in names:
-            summary = summaries[name]
-            value = summary[key] if key in summary else summary["metrics"].get(key)
+            value = summary_value(summaries[name], key)
             values.append("n/a" if value is None else f"{value:.3f}")
         lines.append(f"| {label} | " + " | ".join(values) + " |")
     return "\n".join(lines)
@@ -79,7 +80,7 @@ def run_demo(out: str | Path = "runs/demo", num_scenarios: int = 160, num_eval_s
     from vmax_sim.evaluation.trained import load_trained_policy
     from vmax_sim.metrics import MetricsConfig
     from vmax_sim.training import apply_overrides, preset_config, train
-    from vmax_sim.training.run import _learning_env
+    from vmax_sim.training.run import components
     from vmax_sim.visualization import render_rollouts, rollout_paths
 
     if num_scenarios < 1 or num_eval_scenarios < 1:
@@ -119,7 +120,7 @@ def run_demo(out: str | Path = "runs/demo", num_scenarios: int = 160, num_eval_s
     data = DataConfig(path=str(eval_shards), batch_size=min(16, num_eval_scenarios), num_objects=num_objects)
     evaluations = {policy: evaluate(policy, data).summary for policy in DEMO_BASELINES}
     loaded = load_trained_policy(run_dir)
-    env_config = _learning_env(loaded.config).env_config
+    env_config = components(loaded.config)[0].env_config
     trained = evaluate(loaded.policy, data, env_config=env_config, obs_config=loaded.config.obs,
                        policy_params=loaded.params)
     evaluations["trained " + DEMO_PRESET] = trained.summary

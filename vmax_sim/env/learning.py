@@ -79,6 +79,9 @@ class LearningEnv:
     obs_config: ObservationConfig = ObservationConfig()
     reward_config: RewardConfig = RewardConfig()
     metrics_config: MetricsConfig = MetricsConfig()
+    # compute the log-following action at every step (BC labels; BC+SAC's imitation term); learners that
+    # never read StepOutput.expert_action skip that work and get zeros
+    expert_labels: bool = True
 
     def __post_init__(self) -> None:
         if self.env_config.controlled != "sdc":
@@ -90,10 +93,7 @@ class LearningEnv:
         check_reward_config(self.reward_config)
         config = dataclasses.replace(self.env_config, normalize_actions=True)  # policies act in [-1, 1]
         object.__setattr__(self, "env_config", config)
-
-    @property
-    def core(self) -> Environment:
-        return Environment(self.env_config)
+        object.__setattr__(self, "core", Environment(config))
 
     @property
     def action_dim(self) -> int:
@@ -101,27 +101,32 @@ class LearningEnv:
 
     # ------------------------------------------------------------------ one scene (vmapped below)
 
+    def _measure(self, sim: SimulatorState, arcs: jax.Array):
+        """This step's shared queries and metrics of one scene."""
+        inputs = step_inputs(sim, arcs)
+        shared = shared_queries(inputs, self.metrics_config)
+        return shared, step_metrics(sim.map_index, inputs, self.metrics_config, shared)
+
     def _start(self, sim: SimulatorState):
         """Reset one scene: state, arcs, shared queries, metrics, observation."""
         sim = self.core.reset(sim)
         arcs = reference_arcs(sim, self.env_config)
-        inputs = step_inputs(sim, arcs)
-        shared = shared_queries(inputs, self.metrics_config)
-        metrics = step_metrics(sim.map_index, inputs, self.metrics_config, shared)
+        shared, metrics = self._measure(sim, arcs)
         return sim, arcs, shared, metrics, sdc_observation(sim, shared, self.obs_config)
 
     def _expert(self, sim: SimulatorState) -> jax.Array:
-        """The SDC's log-following action in [-1, 1]. (A,)"""
-        action = self.core.expert_action(sim)
+        """The SDC's log-following action in [-1, 1] (inverse dynamics of the SDC's row only). (A,)"""
         sdc = jnp.argmax(sim.object_metadata.is_sdc)
-        return jnp.clip(action.data[sdc], -1.0, 1.0)
+        row = lambda trajectory: jax.tree.map(lambda a: jax.lax.dynamic_slice_in_dim(a, sdc, 1, 0),  # noqa: E731
+                                              trajectory)
+        dynamics = self.core.dynamics
+        action = dynamics.expert_step(row(sim.current_sim_trajectory), row(sim.next_log_trajectory))[0]
+        return jnp.clip(dynamics.normalize(action), -1.0, 1.0)
 
     def _advance(self, sim: SimulatorState, arcs: jax.Array, action: jax.Array, key: jax.Array):
         """Step one scene with the SDC's action (A,); metrics, termination, truncation, next observation."""
         sim = self.core.step(sim, sdc_action(sim, action))
-        inputs = step_inputs(sim, arcs)
-        shared = shared_queries(inputs, self.metrics_config)
-        metrics = step_metrics(sim.map_index, inputs, self.metrics_config, shared)
+        shared, metrics = self._measure(sim, arcs)
         terminated = jnp.zeros((), bool)
         for name in self.env_config.terminate_on:
             terminated = terminated | (metrics[TERMINATION_METRICS[name]] > 0.5)
@@ -152,7 +157,7 @@ class LearningEnv:
         """Applies action (B, A) in [-1, 1]; finished episodes restart on the next pool scenarios."""
         batch_size = action.shape[0]
         action = jnp.clip(action, -1.0, 1.0)
-        expert = self.expert_action(state)
+        expert = self.expert_action(state) if self.expert_labels else jnp.zeros_like(action)
         key, step_key = jax.random.split(state.key)
         sim, shared, metrics, terminated, truncated, next_obs = jax.vmap(self._advance)(
             state.sim, state.arcs, action, jax.random.split(step_key, batch_size))

@@ -85,12 +85,11 @@ def evaluate_run(run_dir: str | Path, data: str | None = None, mode: str = "non_
     """Evaluates a training run's policy on `data` (default: the run's held-out split), with the run's
     observation and environment settings."""
     from vmax_sim.evaluation.evaluate import evaluate
-    from vmax_sim.training.run import _learning_env as learning_env
-    from vmax_sim.training.run import eval_data_config, resolve_data
+    from vmax_sim.training.run import components, data_config, resolve_data
 
     loaded = load_trained_policy(run_dir, step)
     config = loaded.config
     path = data or resolve_data(config, print)[1]
-    data_config = dataclasses.replace(eval_data_config(config, path), batch_size=batch_size)
-    return evaluate(loaded.policy, data_config, mode=mode, env_config=learning_env(config).env_config,
+    return evaluate(loaded.policy, data_config(config, path, batch_size=batch_size), mode=mode,
+                    env_config=components(config)[0].env_config,
                     obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params)

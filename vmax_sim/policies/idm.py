@@ -216,12 +216,18 @@ def as_env_action(env, state: SimulatorState, action: jax.Array) -> Action:
     return sdc_action(state, action)
 
 
-def idm_policy(env, config: IDMConfig | None = None) -> Policy:
-    """IDM + pure pursuit as an evaluation `Policy` (no parameters, no observation)."""
-    check_bicycle(env, "idm")
-    config = config or IDMConfig()
+def rule_policy(env, name: str, plan_fn) -> Policy:
+    """A rule-based `Policy` (no parameters, no observation) from plan_fn(state, first_timestep) -> the SDC's
+    physical (2,) bicycle action."""
+    check_bicycle(env, name)
 
     def action_fn(params, state, observation, key):
-        return as_env_action(env, state, idm_action(state, config, env.config.first_policy_timestep))
+        return as_env_action(env, state, plan_fn(state, env.config.first_policy_timestep))
 
-    return Policy("idm", action_fn)
+    return Policy(name, action_fn)
+
+
+def idm_policy(env, config: IDMConfig | None = None) -> Policy:
+    """IDM + pure pursuit as an evaluation `Policy`."""
+    config = config or IDMConfig()
+    return rule_policy(env, "idm", lambda state, first: idm_action(state, config, first))

@@ -52,12 +52,11 @@ from vmax_sim.metrics.step import sdc_box_at
 from vmax_sim.policies.idm import (
     IDMConfig,
     Scene,
-    as_env_action,
     bounded_acceleration,
-    check_bicycle,
     idm_step_acceleration,
     lookahead_distance,
     perceive,
+    rule_policy,
     steer,
 )
 from vmax_sim.policies.route import lane_turn_rate, point_at, project
@@ -405,11 +404,6 @@ def pdm_action(state: SimulatorState, config: PDMConfig = PDMConfig(), first_tim
 
 
 def pdm_policy(env, config: PDMConfig | None = None) -> Policy:
-    """PDM-Closed as an evaluation `Policy` (no parameters, no observation)."""
-    check_bicycle(env, "pdm")
+    """PDM-Closed as an evaluation `Policy`."""
     config = config or PDMConfig()
-
-    def action_fn(params, state, observation, key):
-        return as_env_action(env, state, pdm_action(state, config, env.config.first_policy_timestep))
-
-    return Policy("pdm", action_fn)
+    return rule_policy(env, "pdm", lambda state, first: pdm_action(state, config, first))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import types
 import typing
 from collections.abc import Sequence
 from typing import Any
@@ -148,7 +149,7 @@ def _field_kind(cls, name: str, current) -> tuple[type | None, bool]:
     if origin is tuple:
         inner = args[0] if args else None
         return (inner if isinstance(inner, type) else None), True
-    if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+    if origin in (typing.Union, types.UnionType):
         concrete = [a for a in args if a is not type(None)]
         if len(concrete) == 1 and typing.get_origin(concrete[0]) is tuple:
             inner = typing.get_args(concrete[0])
@@ -200,11 +201,8 @@ def apply_overrides(config: TrainConfig, overrides: Sequence[str]) -> TrainConfi
             raise ValueError(f"override {item!r} is not of the form section.field=value")
         key, text = item.split("=", 1)
         parts = key.strip().split(".")
-        if key.strip() in ("algo", "algo_preset"):
-            fresh = TrainConfig(algo=text.strip() if key.strip() == "algo" else config.algo,
-                                algo_preset=text.strip() if key.strip() == "algo_preset" else config.algo_preset)
-            config = dataclasses.replace(config, algo=fresh.algo, algo_preset=fresh.algo_preset,
-                                         algo_config=fresh.algo_config)
+        if key.strip() in ("algo", "algo_preset"):  # a fresh algorithm config from the new name / preset
+            config = dataclasses.replace(config, **{key.strip(): text.strip()}, algo_config=None)
             continue
         if len(parts) < 2 or parts[0] not in SECTIONS:
             raise ValueError(f"override {item!r}: the key must start with one of {', '.join(SECTIONS)} "

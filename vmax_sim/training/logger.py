@@ -16,8 +16,8 @@ STEP_KEY = "env_steps"
 
 
 class RunLogger:
-    def __init__(self, run_dir: Path, tensorboard: bool = True):
-        self.path = Path(run_dir) / "metrics.csv"
+    def __init__(self, run_dir: Path, tensorboard: bool = True, file_name: str = "metrics.csv"):
+        self.path = Path(run_dir) / file_name
         self.rows: list[dict[str, float]] = self._read()
         self.columns: list[str] = list(self.rows[0].keys()) if self.rows else [STEP_KEY]
         for row in self.rows:
@@ -60,6 +60,9 @@ class RunLogger:
                     self._writer.add_scalar(key, value, env_steps)
 
     def _rewrite(self) -> None:
+        if not self.rows:
+            self.path.unlink(missing_ok=True)
+            return
         temporary = self.path.with_suffix(".csv.tmp")
         with temporary.open("w", newline="") as handle:
             writer = csv.DictWriter(handle, self.columns)

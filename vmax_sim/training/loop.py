@@ -25,6 +25,7 @@ from vmax_sim.env.learning import EPISODE_FLAGS, LearningEnv, LearningState, Ste
 from vmax_sim.training.buffer import ReplayBuffer, buffer_add, buffer_sample
 
 OFF_POLICY = ("sac", "bc_sac", "bc")
+EXPERT_LABELLED = ("bc", "bc_sac")  # learners that read Transition.expert_action
 
 
 @struct.dataclass

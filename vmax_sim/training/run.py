@@ -39,6 +39,7 @@ from vmax_sim.training.checkpoint import CheckpointStore
 from vmax_sim.training.config import TrainConfig, config_from_dict, config_to_dict
 from vmax_sim.training.logger import RunLogger
 from vmax_sim.training.loop import (
+    EXPERT_LABELLED,
     OFF_POLICY,
     TrainCarry,
     env_steps_per_chunk,
@@ -62,10 +63,6 @@ class TrainResult:
     summary: dict
 
 
-def _learning_env(config: TrainConfig) -> LearningEnv:
-    return LearningEnv(config.env, config.obs, config.reward)
-
-
 def build_learner(config: TrainConfig, env: LearningEnv):
     network = config.network
     return make_learner(config.algo, config.algo_config, lambda: make_encoder(network), env.action_dim)
@@ -74,7 +71,7 @@ def build_learner(config: TrainConfig, env: LearningEnv):
 @functools.lru_cache(maxsize=8)
 def components(config: TrainConfig):
     """(LearningEnv, Learner) of a configuration, built once per process so jitted functions are reused."""
-    env = _learning_env(config)
+    env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.algo in EXPERT_LABELLED)
     return env, build_learner(config, env)
 
 
@@ -99,19 +96,20 @@ def _chunk_function(config: TrainConfig, learner, env: LearningEnv, shapes):
     return _CHUNKS[config]
 
 
+def data_config(config: TrainConfig, path: str, **changes) -> DataConfig:
+    """The DataConfig of `config`'s data sizes for the shards at `path` (evaluation order by default)."""
+    data = config.data
+    values = dict(path=path, batch_size=config.train.eval_batch_size, num_objects=data.num_objects,
+                  num_roadgraph_points=data.num_roadgraph_points, num_paths=data.num_paths,
+                  num_points_per_path=data.num_points_per_path, max_num_lights=data.max_num_lights,
+                  shuffle_buffer=data.shuffle_buffer)
+    values.update(changes)
+    return DataConfig(**values)
+
+
 def train_data_config(config: TrainConfig, path: str, seed: int) -> DataConfig:
-    data = config.data
-    return DataConfig(path=path, batch_size=1, num_objects=data.num_objects,
-                      num_roadgraph_points=data.num_roadgraph_points, num_paths=data.num_paths,
-                      num_points_per_path=data.num_points_per_path, max_num_lights=data.max_num_lights,
-                      shuffle_seed=seed, shuffle_buffer=data.shuffle_buffer, repeat=True, prefetch=0)
-
-
-def eval_data_config(config: TrainConfig, path: str) -> DataConfig:
-    data = config.data
-    return DataConfig(path=path, batch_size=config.train.eval_batch_size, num_objects=data.num_objects,
-                      num_roadgraph_points=data.num_roadgraph_points, num_paths=data.num_paths,
-                      num_points_per_path=data.num_points_per_path, max_num_lights=data.max_num_lights)
+    """The training stream: one scenario at a time, seeded shuffle, repeated forever."""
+    return data_config(config, path, batch_size=1, shuffle_seed=seed, repeat=True, prefetch=0)
 
 
 # ----------------------------------------------------------------------------- embedded synthetic data
@@ -398,35 +396,18 @@ class _Evaluator:
 
     def __init__(self, config: TrainConfig, eval_path: str, run_dir: Path, print_fn):
         self.config = config
-        self.data = eval_data_config(config, eval_path)
+        self.data = data_config(config, eval_path)
         self.policy = _policy_of(config)
         self.env_config = components(config)[0].env_config
-        self.path = run_dir / "eval.csv"
+        self.log = RunLogger(run_dir, tensorboard=False, file_name="eval.csv")
         self.print_fn = print_fn
         self._prepared = None
 
     def truncate_after(self, env_steps: int) -> None:
-        rows = self.rows()
-        self._write([row for row in rows if row["env_steps"] <= env_steps])
+        self.log.truncate_after(env_steps)
 
     def rows(self) -> list[dict]:
-        import csv
-
-        if not self.path.exists():
-            return []
-        with self.path.open(newline="") as handle:
-            return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(handle)]
-
-    def _write(self, rows: list[dict]) -> None:
-        import csv
-
-        if not rows:
-            self.path.unlink(missing_ok=True)
-            return
-        with self.path.open("w", newline="") as handle:
-            writer = csv.DictWriter(handle, list(rows[0]))
-            writer.writeheader()
-            writer.writerows(rows)
+        return self.log.rows
 
     def run(self, params, env_steps: int, wall_s: float) -> dict:
         from vmax_sim.evaluation.evaluate import evaluate, prepare_batches
@@ -436,11 +417,11 @@ class _Evaluator:
         result = evaluate(self.policy, self._prepared, data_config=self.data, env_config=self.env_config,
                           obs_config=self.config.obs, policy_params=params)
         summary = result.summary
-        row = {"env_steps": float(env_steps), "wall_s": float(wall_s), "accuracy": summary["accuracy"],
+        row = {"wall_s": float(wall_s), "accuracy": summary["accuracy"],
                "vmax_score": summary["vmax_score"], "nuplan_score": summary["nuplan_score"],
                "accuracy_at_fault": summary["accuracy_at_fault"]}
         row.update({k: float(v) for k, v in summary["metrics"].items() if v is not None and k in EVAL_COLUMNS})
-        self._write(self.rows() + [row])
+        self.log.log(env_steps, row)
         self.print_fn(f"eval @ {env_steps:,} env steps: accuracy {summary['accuracy']:.3f}  "
                       f"V-Max score {summary['vmax_score']:.3f}  ({summary['num_episodes']} held-out episodes)")
         return summary
