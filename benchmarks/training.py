@@ -12,16 +12,19 @@ import json
 import subprocess
 import sys
 
-CONFIGS = [  # (preset, overrides)
+CONFIGS = [  # (preset, overrides); a PPO chunk step is a whole update (10,240 env steps by default)
     ("paper-sac-lq", ["algo.buffer_size=100000"]),
+    ("paper-sac-lq", ["algo.buffer_size=100000", "algo.shared_encoder=true"]),
     ("sac-lq", []),
+    ("sac-lq", ["algo.shared_encoder=true"]),
     ("sac-mlp", []),
     ("sac-none", []),
     ("sac-lqh", []),
     ("sac-wayformer", []),
     ("sac-mtr", []),
-    ("ppo-lq", []),
-    ("ppo-mlp", []),
+    ("ppo-lq", ["train.chunk_steps=1"]),
+    ("ppo-mlp", ["train.chunk_steps=1"]),
+    ("ppo-none", ["train.chunk_steps=1"]),
     ("bc-mlp", []),
     ("bc_sac-lq", []),
 ]
@@ -42,7 +45,7 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--quick", action="store_true", help="three configurations, fewer chunks")
     parser.add_argument("--json", action="store_true")
-    parser.add_argument("--only", default=None, help="comma-separated presets")
+    parser.add_argument("--only", default=None, help="comma-separated presets (or 'preset override ...' rows)")
     parser.add_argument("--chunks", type=int, default=6)
     parser.add_argument("--child", nargs="*", help=argparse.SUPPRESS)
     args, extra = parser.parse_known_args()
@@ -53,7 +56,7 @@ def main() -> None:
     configs = CONFIGS[:3] if args.quick else CONFIGS
     if args.only:
         wanted = set(args.only.split(","))
-        configs = [c for c in CONFIGS if c[0] in wanted]
+        configs = [c for c in CONFIGS if c[0] in wanted or " ".join([c[0], *c[1]]) in wanted]
     rows = []
     for preset, overrides in configs:
         done = subprocess.run([sys.executable, __file__, "--chunks", str(args.chunks), "--child", preset,

@@ -1,5 +1,6 @@
 """SAC: losses on hand-worked values, Polyak averaging, a learning check, determinism and no recompiles."""
 
+import dataclasses
 import math
 
 import chex
@@ -188,3 +189,38 @@ def test_sac_learns_the_toy_task():
     assert all(bool(jnp.isfinite(m)) for m in metrics.values())
     assert random < -15.0  # about -23: the random walk drifts away from the target
     assert trained > -3.0, (float(trained), float(random))  # the expert scores about -0.1
+
+
+def test_shared_encoder_actor_has_no_encoder_and_its_loss_leaves_the_encoder_alone(tiny):
+    config, batch = tiny
+    config = dataclasses.replace(config, shared_encoder=True)
+    learner = make_learner("sac", config, lambda: toy.ToyEncoder(8), 1)
+    state = learner.init(jax.random.key(0), batch.obs)
+    assert "encoder" not in state.actor_params["params"]  # the actor reads the critic encoder's features
+    new, metrics = jax.jit(learner.update)(state, batch, jax.random.key(1))
+    assert all(bool(jnp.isfinite(m)) for m in metrics.values())
+    # the encoder moved (critic loss) and the actor moved; acting reads both parameter sets
+    encoder_before = state.critic_params["params"]["encoder"]
+    encoder_after = new.critic_params["params"]["encoder"]
+    assert not np.allclose(encoder_before["Dense_0"]["kernel"], encoder_after["Dense_0"]["kernel"])
+    params = learner.policy_params(new)
+    assert set(params) == {"actor", "critic"}
+    action = learner.act(params, batch.obs, jax.random.key(0), True)
+    assert action.shape == (16, 1) and bool(jnp.all(jnp.abs(action) <= 1.0))
+    # the actor loss gives the encoder no gradient (features are detached)
+    networks = make_networks(config, lambda: toy.ToyEncoder(8), 1)
+    losses = L.make_losses(networks, config)
+    features = networks.actor_input(state.critic_params, batch.obs)
+    grads = jax.grad(lambda c: losses.actor(state.actor_params, c, 0.2, batch.replace(obs=features),
+                                            jax.random.key(0))[0])(state.critic_params)
+    assert float(jnp.max(jnp.abs(grads["params"]["encoder"]["Dense_0"]["kernel"]))) == 0.0
+
+
+def test_sac_with_a_shared_encoder_learns_the_toy_task():
+    config = get_config("sac", "debug", gamma=0.9, batch_size=128, shared_encoder=True)
+    learner = make_learner("sac", config, lambda: toy.ToyEncoder(32), toy.ACTION_DIM)
+    state, _ = toy.train_off_policy(learner, jax.random.key(0), num_envs=16, num_iterations=300,
+                                    warmup_iterations=20, updates_per_step=1, batch_size=128)
+    params = learner.policy_params(state)
+    trained = toy.episode_return(lambda obs, key: learner.act(params, obs, key, True), jax.random.key(1))
+    assert trained > -3.0, float(trained)

@@ -99,8 +99,23 @@ class Critic(nn.Module):
         self.heads = heads(tuple(self.hidden_sizes), self.activation)
 
     def __call__(self, obs, action: jax.Array) -> jax.Array:
-        features = self.encoder(obs)
+        return self.q_from_features(self.encode(obs), action)
+
+    def encode(self, obs) -> jax.Array:
+        """obs (B, ...) -> features (B, D)."""
+        return self.encoder(obs)
+
+    def q_from_features(self, features: jax.Array, action: jax.Array) -> jax.Array:
+        """features (B, D), action (B, A) -> Q (num_heads, B): the heads alone (shared-encoder SAC)."""
         return self.heads(jnp.concatenate([features, action.astype(features.dtype)], axis=-1))
+
+
+class Identity(nn.Module):
+    """Features pass through: the encoder of an actor that reads another network's features."""
+
+    @nn.compact
+    def __call__(self, features: jax.Array) -> jax.Array:
+        return features
 
 
 class ValueNet(nn.Module):

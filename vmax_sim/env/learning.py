@@ -180,22 +180,28 @@ class LearningEnv:
             episode_length=jnp.where(done, 0, episode_length),
             episode_flags={name: flag & ~done for name, flag in flags.items()},
             next_scenario=state.next_scenario, key=key)
-        pool_size = pool.timestep.shape[0]
-
-        def restart(current: LearningState) -> LearningState:
-            # the k-th finished episode takes the k-th next scenario of the pool
-            indices = (current.next_scenario + jnp.cumsum(done) - 1) % pool_size
-            fresh_sim, fresh_arcs, fresh_shared, fresh_metrics, fresh_obs = jax.vmap(self._start)(_take(pool, indices))
-            fresh = (fresh_sim, fresh_arcs, fresh_shared, fresh_metrics, fresh_obs)
-            kept = (current.sim, current.arcs, current.shared, current.metrics, current.observation)
-            sim, arcs, shared, metrics, observation = jax.tree.map(
-                lambda f, c: jnp.where(_row_mask(done, c), f, c), fresh, kept)
-            return current.replace(
-                sim=sim, arcs=arcs, shared=shared, metrics=metrics, observation=observation,
-                next_scenario=((current.next_scenario + jnp.sum(done)) % pool_size).astype(jnp.int32))
-
-        new_state = jax.lax.cond(jnp.any(done), restart, lambda current: current, running)
+        new_state = self._restart_finished(running, done, pool)
         return new_state, output
+
+    def _restart_finished(self, state: LearningState, done: jax.Array, pool: SimulatorState) -> LearningState:
+        """Finished rows restart on the next pool scenarios: the k-th finished row (in row order) takes the
+        k-th next scenario. One row at a time, written in place: restarting the whole batch and selecting
+        rows would copy every scene's map index (~3.5 MB each) whenever any episode ends."""
+        pool_size = pool.timestep.shape[0]
+        rows = jnp.nonzero(done, size=done.shape[0], fill_value=0)[0]  # (B,) finished rows first
+        num_done = jnp.sum(done).astype(jnp.int32)
+
+        def restart_one(k, parts):
+            scenario = (state.next_scenario + k) % pool_size
+            fresh = self._start(jax.tree.map(lambda a: a[scenario], pool))
+            return jax.tree.map(lambda c, f: jax.lax.dynamic_update_index_in_dim(c, f.astype(c.dtype), rows[k], 0),
+                                parts, fresh)
+
+        kept = (state.sim, state.arcs, state.shared, state.metrics, state.observation)
+        sim, arcs, shared, metrics, observation = jax.lax.cond(
+            num_done > 0, lambda parts: jax.lax.fori_loop(0, num_done, restart_one, parts), lambda parts: parts, kept)
+        return state.replace(sim=sim, arcs=arcs, shared=shared, metrics=metrics, observation=observation,
+                             next_scenario=((state.next_scenario + num_done) % pool_size).astype(jnp.int32))
 
 
 def _has_noise(config: ObservationConfig) -> bool:
@@ -207,6 +213,3 @@ def _take(pool: SimulatorState, indices: jax.Array) -> SimulatorState:
     return jax.tree.map(lambda a: a[indices], pool)
 
 
-def _row_mask(rows: jax.Array, like: jax.Array) -> jax.Array:
-    """rows (B,) broadcast against an array with leading axis B."""
-    return rows.reshape(rows.shape + (1,) * (like.ndim - 1))

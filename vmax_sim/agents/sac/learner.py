@@ -57,8 +57,8 @@ def build_learner(config: SACConfig, networks: SACNetworks,
     def init(key: jax.Array, obs_example) -> SACTrainState:
         actor_key, critic_key = jax.random.split(key)
         action = jnp.zeros((batch_size_of(obs_example), action_dim), jnp.float32)
-        actor_params = networks.actor.init(actor_key, obs_example)
         critic_params = networks.critic.init(critic_key, obs_example, action)
+        actor_params = networks.actor.init(actor_key, networks.actor_input(critic_params, obs_example))
         log_alpha = jnp.asarray(jnp.log(config.init_alpha), jnp.float32)
         return SACTrainState(
             actor_params=actor_params, critic_params=critic_params, target_critic_params=critic_params,
@@ -70,8 +70,9 @@ def build_learner(config: SACConfig, networks: SACNetworks,
         critic_key, actor_key = jax.random.split(key)
         alpha = jnp.exp(state.log_alpha)
 
-        (_, critic_metrics), grads = jax.value_and_grad(losses.critic, has_aux=True)(
+        (_, (critic_metrics, actor_input)), grads = jax.value_and_grad(losses.critic, has_aux=True)(
             state.critic_params, state.target_critic_params, state.actor_params, alpha, batch, critic_key)
+        batch = batch.replace(obs=actor_input)  # the shared encoder's features of s, computed once
         critic_grad_norm = global_norm(grads)
         critic_params, critic_opt_state = apply_gradients(critic_opt, grads, state.critic_opt_state,
                                                           state.critic_params)
@@ -98,8 +99,9 @@ def build_learner(config: SACConfig, networks: SACNetworks,
                    "critic_grad_norm": scalar(critic_grad_norm), "actor_grad_norm": scalar(actor_grad_norm)}
         return new_state, metrics
 
-    act, act_with_info = make_act_fns(networks.actor.apply)
-    return Learner(init=init, update=update, act=act, policy_params=lambda state: state.actor_params,
+    act, act_with_info = make_act_fns(networks.policy)
+    return Learner(init=init, update=update, act=act,
+                   policy_params=lambda state: networks.policy_params_of(state.actor_params, state.critic_params),
                    act_with_info=act_with_info, value=None)
 
 

@@ -49,11 +49,12 @@ def temperature_loss(log_alpha: jax.Array, log_prob: jax.Array, target_entropy: 
 class SACLosses(NamedTuple):
     """Network-level losses; each returns (loss (), aux)."""
 
-    # (critic_params, target_critic_params, actor_params, alpha, batch, key) -> (loss, metrics)
-    critic: Callable[..., tuple[jax.Array, Metrics]]
+    # (critic_params, target_critic_params, actor_params, alpha, batch, key) -> (loss, (metrics, actor_input)):
+    # actor_input is what the actor loss reads for batch.obs (obs, or the detached encoder features when shared)
+    critic: Callable[..., tuple[jax.Array, tuple[Metrics, object]]]
     # (actor_params, critic_params, alpha, batch, key) -> (loss, (log_prob (B,), metrics))
     actor: Callable[..., tuple[jax.Array, tuple[jax.Array, Metrics]]]
-    # (dist, critic_params, alpha, obs, key) -> (loss, (log_prob (B,), metrics)): the actor loss once the
+    # (dist, critic_params, alpha, actor_input, key) -> (loss, (log_prob (B,), metrics)): the actor loss once the
     # policy distribution on obs is known (BC+SAC adds its imitation term to the same forward pass)
     actor_from_dist: Callable[..., tuple[jax.Array, tuple[jax.Array, Metrics]]]
 
@@ -61,20 +62,27 @@ class SACLosses(NamedTuple):
 def make_losses(networks: SACNetworks, config: SACConfig) -> SACLosses:
     def critic(critic_params: Params, target_critic_params: Params, actor_params: Params, alpha: jax.Array,
                batch: Transition, key: jax.Array):
-        next_dist = networks.actor.apply(actor_params, batch.next_obs)
-        next_action, next_log_prob = D.sample_and_log_prob(next_dist, key)
-        next_q = networks.critic.apply(target_critic_params, batch.next_obs, next_action)  # (N, B)
+        # shared encoder: the actor and the target heads read the online encoder's features of s' (DrQ-v2)
+        next_input = networks.actor_input(critic_params, batch.next_obs)
+        next_action, next_log_prob = D.sample_and_log_prob(networks.actor.apply(actor_params, next_input), key)
+        next_q = networks.q_of_input(target_critic_params, next_input, next_action)  # (N, B)
         target = soft_td_target(batch.reward, batch.discount, next_q, next_log_prob, alpha, config.gamma,
                                 config.reward_scale)
         target = jax.lax.stop_gradient(target)
-        q = networks.critic.apply(critic_params, batch.obs, batch.action)  # (N, B)
+        if networks.shared_encoder:
+            features = networks.critic.apply(critic_params, batch.obs, method="encode")  # (B, D)
+            q = networks.q_of_input(critic_params, features, batch.action)
+            actor_input = jax.lax.stop_gradient(features)
+        else:
+            q = networks.critic.apply(critic_params, batch.obs, batch.action)  # (N, B)
+            actor_input = batch.obs
         loss = critic_loss(q, target)
-        return loss, {"critic_loss": scalar(loss), "q_mean": scalar(jnp.mean(q)),
-                      "target_q_mean": scalar(jnp.mean(target))}
+        return loss, ({"critic_loss": scalar(loss), "q_mean": scalar(jnp.mean(q)),
+                       "target_q_mean": scalar(jnp.mean(target))}, actor_input)
 
     def actor_from_dist(dist: D.TanhGaussian, critic_params: Params, alpha: jax.Array, obs, key: jax.Array):
         action, log_prob = D.sample_and_log_prob(dist, key)
-        q = networks.critic.apply(critic_params, obs, action)
+        q = networks.q_of_input(critic_params, obs, action)
         loss = actor_loss(q, log_prob, alpha)
         metrics = {"actor_loss": scalar(loss), "entropy": scalar(-jnp.mean(log_prob)),
                    "policy_std": scalar(jnp.mean(jnp.exp(dist.log_std)))}
