@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from scenariomax.schema import Sizes
+from scenariomax.sources.registry import DATASETS
 
 
 class _OneLineErrors(click.Group):
@@ -87,7 +88,7 @@ def _pipeline_options(fn):
 
 
 @main.command()
-@click.option("--dataset", type=click.Choice(["synthetic", "womd", "nuplan", "av2", "scenarionet"]),
+@click.option("--dataset", type=click.Choice(list(DATASETS)),
               default="synthetic", show_default=True)
 @click.option("--src", default=None, help="Raw input files, directory or glob (real datasets).")
 @click.option("--maps", default=None, help="nuPlan maps root.")

@@ -30,7 +30,7 @@ from scenariomax.io.tfrecord import TFRecordWriter, iter_records
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes, load_schema
 from scenariomax.shards import shard_name
-from scenariomax.sources.base import Failure, InputError, Source
+from scenariomax.sources.base import MANIFEST_NOTES, Failure, InputError, Source
 
 MANIFEST = "manifest.json"
 WORK_DIR = ".work"
@@ -65,6 +65,7 @@ class UnitResult:
     num_records: int
     failures: tuple[Failure, ...]
     peak_rss_mib: float = 0.0  # the worker's peak resident memory so far (reported in the manifest)
+    notes: tuple[dict, ...] = ()  # {"unit", "scenario", "notes"} of written scenarios that carry manifest notes
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,7 +114,7 @@ def prepare_scenario(scenario: Scenario, sizes: Sizes, transform: Transform | No
 
 
 def _iter_unit_records(source: Source, unit: str, sizes: Sizes, transform: Transform | None,
-                       failures: list[Failure]) -> Iterator[bytes]:
+                       failures: list[Failure], notes: list[dict] | None = None) -> Iterator[bytes]:
     position = 0
     try:
         for item in source.read_unit(unit):
@@ -121,9 +122,13 @@ def _iter_unit_records(source: Source, unit: str, sizes: Sizes, transform: Trans
                 failures.append(item)
                 continue
             try:
-                yield prepare_scenario(item, sizes, transform)
+                record = prepare_scenario(item, sizes, transform)
             except Exception as error:  # per-scenario isolation: record and continue
                 failures.append(Failure(unit, item.scenario_id or f"#{position}", _one_line(error)))
+            else:
+                if notes is not None and item.metadata.get(MANIFEST_NOTES):
+                    notes.append({"unit": unit, "scenario": item.scenario_id, "notes": item.metadata[MANIFEST_NOTES]})
+                yield record
             position += 1
     except InputError as error:
         failures.append(Failure(unit, "*", _one_line(error)))
@@ -135,22 +140,24 @@ def convert_unit_to_file(source: Source, unit: str, work_dir: str, sizes: Sizes,
                          transform: Transform | None) -> UnitResult:
     """Worker: converts one unit into a private record file (memory stays bounded)."""
     failures: list[Failure] = []
+    notes: list[dict] = []
     digest = hashlib.sha1(unit.encode()).hexdigest()[:16]
     temp = Path(work_dir) / f"unit-{digest}.tmp"
     final = Path(work_dir) / f"unit-{digest}.rec"
     with TFRecordWriter(temp) as writer:
-        for record in _iter_unit_records(source, unit, sizes, transform, failures):
+        for record in _iter_unit_records(source, unit, sizes, transform, failures, notes):
             writer.write(record)
         count = writer.num_records
     os.replace(temp, final)
-    return UnitResult(unit, str(final), None, count, tuple(failures), _peak_rss_mib())
+    return UnitResult(unit, str(final), None, count, tuple(failures), _peak_rss_mib(), tuple(notes))
 
 
 def convert_unit_in_memory(source: Source, unit: str, sizes: Sizes, transform: Transform | None) -> UnitResult:
     """Ray task body: records travel back through the object store (works across machines)."""
     failures: list[Failure] = []
-    records = tuple(_iter_unit_records(source, unit, sizes, transform, failures))
-    return UnitResult(unit, None, records, len(records), tuple(failures), _peak_rss_mib())
+    notes: list[dict] = []
+    records = tuple(_iter_unit_records(source, unit, sizes, transform, failures, notes))
+    return UnitResult(unit, None, records, len(records), tuple(failures), _peak_rss_mib(), tuple(notes))
 
 
 def _peak_rss_mib() -> float:
@@ -217,12 +224,14 @@ class _ShardSink:
                 "shards": [],
                 "units": {unit: {"sealed_records": 0, "done": False, "num_records": 0} for unit in units},
                 "failures": [],
+                "notes": [],  # per-scenario decisions and repairs the source reports (see MANIFEST_NOTES)
             }
         self.open_writer: TFRecordWriter | None = None
         self.open_path: Path | None = None
         self.open_units: dict[str, int] = {}  # unit -> records in the open shard
         self.finished_units: set[str] = set()  # all records handed over (maybe not yet sealed)
         self.pending_failures: dict[str, list[dict]] = {}
+        self.pending_notes: dict[str, list[dict]] = {}
 
     # Units -----------------------------------------------------------------------------------------
     def unit_state(self, unit: str) -> dict:
@@ -243,6 +252,7 @@ class _ShardSink:
         self.manifest["peak_worker_rss_mib"] = round(max(self.manifest.get("peak_worker_rss_mib", 0.0),
                                                          result.peak_rss_mib), 1)
         self.pending_failures[result.unit] = [dataclasses.asdict(f) for f in result.failures]
+        self.pending_notes[result.unit] = list(result.notes)
         self.finished_units.add(result.unit)
         if result.unit not in self.open_units:
             self._mark_done(result.unit)
@@ -261,6 +271,8 @@ class _ShardSink:
         state["done"] = True
         self.manifest["failures"] = [f for f in self.manifest["failures"] if f["unit"] != unit]
         self.manifest["failures"] += self.pending_failures.pop(unit, [])
+        notes = [n for n in self.manifest.get("notes", []) if n["unit"] != unit] + self.pending_notes.pop(unit, [])
+        self.manifest["notes"] = notes
 
     # Shards ----------------------------------------------------------------------------------------
     def _append(self, unit: str, record: bytes) -> None:

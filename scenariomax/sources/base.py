@@ -29,6 +29,11 @@ class Failure:
     reason: str  # one line
 
 
+# A source may put a JSON-serialisable dict under `Scenario.metadata[MANIFEST_NOTES]`: what it decided or
+# repaired for that scenario (e.g. which object it chose as the SDC). The pipeline copies it, with the unit and
+# scenario id, into the manifest's "notes" list when the scenario is written.
+MANIFEST_NOTES = "manifest_notes"
+
 UnitItem = Union["Scenario", Failure]  # noqa: F821 (Scenario imported lazily by sources)
 
 

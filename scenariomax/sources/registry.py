@@ -5,7 +5,7 @@ from __future__ import annotations
 from scenariomax.schema import Sizes
 from scenariomax.sources.base import InputError, Source
 
-DATASETS = ("synthetic", "womd", "nuplan", "av2", "scenarionet")
+DATASETS = ("synthetic", "womd", "nuplan", "av2", "scenarionet", "gpudrive")
 
 
 def make_source(dataset: str, *, src: str | None = None, sizes: Sizes | None = None, num_scenarios: int = 100,
@@ -30,6 +30,10 @@ def make_source(dataset: str, *, src: str | None = None, sizes: Sizes | None = N
         from scenariomax.sources.scenarionet import ScenarioNetSource
 
         return ScenarioNetSource(src=src, sizes=sizes)
+    if dataset == "gpudrive":
+        from scenariomax.sources.gpudrive import GpuDriveSource
+
+        return GpuDriveSource(src=src, sizes=sizes)
     if dataset == "nuplan":
         from scenariomax.sources.nuplan import NuplanSource
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from scenariomax import schema as sch
 from scenariomax.enrich.budget import fit_to_budget
+from scenariomax.enrich.orientation import orient_road_edges
 from scenariomax.enrich.roadgraph import (
     DEFAULT_SPACING_M,
     LaneLinks,
@@ -31,7 +32,6 @@ from scenariomax.enrich.roadgraph import (
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
 from scenariomax.sources.womd.convert import ScenarioBuildError
-from scenariomax.sources.womd.edges import orient_road_edges
 from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, window_starts, wrap_angle
 
 SOURCE_NAME = "scenarionet"

@@ -1,12 +1,12 @@
 """Waymo Open Motion Dataset: Scenario protos (and motion tf.Examples) in TFRecord files."""
 
+from scenariomax.enrich.orientation import lane_side_vote, orient_road_edges
 from scenariomax.sources.womd.convert import (
     ScenarioBuildError,
     map_polylines,
     parse_scenario,
     scenario_windows,
 )
-from scenariomax.sources.womd.edges import lane_side_vote, orient_road_edges
 from scenariomax.sources.womd.proto import MapFeatureProto, ScenarioProto
 from scenariomax.sources.womd.source import WomdSource, expand_src
 from scenariomax.sources.womd.tfexample import looks_like_tf_example, tf_example_to_scenario

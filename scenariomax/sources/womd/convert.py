@@ -14,11 +14,11 @@ from google.protobuf.message import DecodeError
 
 from scenariomax import schema as sch
 from scenariomax.enrich.budget import fit_to_budget
+from scenariomax.enrich.orientation import orient_road_edges
 from scenariomax.enrich.roadgraph import LaneLinks, MapPolyline, lane_graph_arrays, polylines_to_roadgraph
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
 from scenariomax.sources.womd import proto
-from scenariomax.sources.womd.edges import orient_road_edges
 from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, window_starts, wrap_angle
 
 MPH_TO_MPS = 0.44704
