@@ -34,6 +34,7 @@ def whole_run(synthetic_shards, tmp_path_factory):
     return config, run, train(config, run, progress=False, print_fn=lambda line: None)
 
 
+@pytest.mark.slow  # ~90 s on 2 cores: CI runs it in the slow pass
 def test_sac_run_writes_everything_a_researcher_opens(whole_run):
     config, run, result = whole_run
     assert result.env_steps == 120 and result.summary["finished"]
@@ -60,6 +61,7 @@ def test_every_algorithm_trains_and_evaluates(synthetic_shards, tmp_path, algo):
     assert losses and all(np.isfinite(float(rows(tmp_path / algo)[-1][k])) for k in losses)
 
 
+@pytest.mark.slow  # ~90 s on 2 cores: CI runs it in the slow pass
 def test_stopped_run_resumes_to_the_uninterrupted_curve(whole_run, tmp_path):
     config, whole_dir, _ = whole_run
     # stopped after 3 chunks (60 steps; the last checkpoint is at 40), then resumed

@@ -81,7 +81,8 @@ def finite_difference_motion(xy: jnp.ndarray, yaw: jnp.ndarray, dt: float) -> di
 
 
 def offroad(map_index: MapIndex, sdc_box: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Off-road if any corner is right of (outside) its nearest road edge. -> (bool, max signed m)."""
+    """Off-road if any corner is right of (outside) its nearest road edge (at a shared vertex, outside
+    by the vertex rule of `signed_edge_distance`). -> (bool, max signed m)."""
     distance = signed_edge_distance(map_index, box_corners(sdc_box), sdc_box[:2])
     worst = jnp.max(distance)
     return worst > 0.0, worst
