@@ -162,6 +162,32 @@ def validate(path):
     sys.exit(1 if report.bad else 0)
 
 
+@main.command()
+@click.argument("path")
+@click.option("--scenario", "scenario_id", default=None, help="Show only this scenario id (serve: open it first).")
+@click.option("--out", type=click.Path(dir_okay=False), default="view.html", show_default=True,
+              help="The self-contained HTML file to write.")
+@click.option("--max-scenarios", type=click.IntRange(1), default=20, show_default=True,
+              help="HTML: embed at most this many scenarios (the first ones).")
+@click.option("--serve", is_flag=True, help="Serve every scenario from 127.0.0.1 instead (loaded on demand).")
+@click.option("--port", type=click.IntRange(0, 65535), default=8765, show_default=True, help="--serve: the port.")
+def view(path, scenario_id, out, max_scenarios, serve, port):
+    """Offline web viewer of shards: map, objects, lights, paths, timeline (docs/viewer.md)."""
+    if serve:
+        from scenariomax.view import serve_view
+
+        try:
+            serve_view(path, port=port, scenario_id=scenario_id, print_fn=click.echo)
+        except OSError as error:
+            raise click.ClickException(str(error).splitlines()[0]) from None
+        return
+    from scenariomax.view import write_view
+
+    result = write_view(path, out, scenario_id=scenario_id, max_scenarios=max_scenarios)
+    click.echo(f"{result.note}; {result.size_bytes / 1e6:.1f} MB", err=True)
+    click.echo(str(result.out))
+
+
 @main.command("schema-doc")
 @click.option("--out", type=click.Path(dir_okay=False), default="docs/schema.md", show_default=True)
 def schema_doc(out):

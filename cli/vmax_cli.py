@@ -100,7 +100,16 @@ def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
               help="Comma-separated policies: expert, constant, idm, pdm, random, or training run directories "
                    "(their latest checkpoint). Several give one comparison table.")
 @click.option("--data", default=None, help="Shard directory, file or glob (default for a run: its held-out split).")
-@click.option("--mode", default="non_reactive", show_default=True, help="Evaluation mode (non_reactive).")
+@click.option("--mode", default="non_reactive", show_default=True,
+              help="Evaluation mode: non_reactive (others replay the log), reactive (controllable agents driven "
+                   "along their paths), perturbed (the SDC starts off its log). See docs/evaluation.md.")
+@click.option("--agents", default=None, help="reactive: who drives the controllable agents: idm (default), pdm, "
+                                              "or same (the evaluated policy: self-play).")
+@click.option("--max-agents", type=click.IntRange(1), default=None,
+              help="reactive: at most this many agents are driven, nearest the SDC first (default 48).")
+@click.option("--perturb-sigma", type=click.FloatRange(0.0), default=None,
+              help="perturbed: standard deviation of the SDC's lateral start offset, m (default 1.0; the heading "
+                   "error's is 0.05 rad per m).")
 @click.option("--batch-size", type=click.IntRange(1), default=8, show_default=True)
 @click.option("--num-scenarios", type=click.IntRange(1), default=None, help="Evaluate only the first N.")
 @click.option("--num-objects", type=click.IntRange(1), default=64, show_default=True, help="Object slots loaded.")
@@ -110,16 +119,31 @@ def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
               help="A file ending in .json: the summary JSON (one policy). Otherwise a directory for table.md, "
                    "table.csv, episodes-<policy>.csv and summaries.json.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def evaluate(policy, data, mode, batch_size, num_scenarios, num_objects, seed, as_json, out, quiet):
+@click.option("--gallery", "gallery_dir", type=click.Path(file_okay=False), default=None,
+              help="Directory for a failure gallery: a GIF and a PNG per failed episode (and a few passed ones), "
+                   "one folder per policy, and index.html.")
+@click.option("--gallery-max", type=click.IntRange(0), default=50, show_default=True,
+              help="Failed episodes drawn per policy (the first ones).")
+@click.option("--gallery-passed", type=click.IntRange(0), default=5, show_default=True,
+              help="Passed episodes drawn per policy, for comparison.")
+@click.option("--difficulty", is_flag=True,
+              help="Tag scenarios by difficulty and print accuracy and V-Max score per bucket (difficulty.csv "
+                   "in an --out directory).")
+def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, num_scenarios, num_objects, seed,
+             as_json, out, quiet, gallery_dir, gallery_max, gallery_passed, difficulty):
     """Closed-loop evaluation: accuracy, nuPlan and V-Max scores; several policies give one comparison table."""
     from vmax_sim.evaluation import format_summary
+    from vmax_sim.evaluation.extras import EvaluationExtras
+    from vmax_sim.evaluation.modes import parse_mode
     from vmax_sim.evaluation.report import compare_policies, format_markdown, split_policies, write_report
 
     try:
+        mode = parse_mode(mode, agents=agents, perturb_sigma=perturb_sigma, max_agents=max_agents, seed=seed)
         entries = split_policies(policy)
+        extras = EvaluationExtras.create(gallery_dir, gallery_max, gallery_passed, difficulty)
         runs = compare_policies(entries, data, mode, num_scenarios=num_scenarios, batch_size=batch_size,
                                 num_objects=num_objects, seed=seed, progress=not quiet and not as_json,
-                                print_fn=lambda line: click.echo(line, err=True))
+                                print_fn=lambda line: click.echo(line, err=True), on_batch=extras.on_batch)
         summaries = {run.name: run.result.summary for run in runs}
         if len(runs) == 1:
             text = json.dumps(runs[0].result.summary, indent=2)
@@ -135,6 +159,8 @@ def evaluate(policy, data, mode, batch_size, num_scenarios, num_objects, seed, a
             (Path(out) / "summaries.json").write_text(json.dumps(summaries, indent=2))
             if not as_json:
                 click.echo(f"wrote {out}/table.md, table.csv, summaries.json and episodes-<policy>.csv")
+        extras.finish(runs, out, show_tables=not as_json, progress=not quiet and not as_json, print_fn=click.echo,
+                      note=f"data: {data or 'the held-out split of each run'}")
     except (InputError, ValueError, OSError) as error:
         _fail(str(error).splitlines()[0] if str(error) else type(error).__name__)
 
@@ -158,6 +184,35 @@ def demo(out, num_scenarios, num_eval_scenarios, train_steps, seed, workers):
                  workers=workers, train_steps=train_steps, print_fn=click.echo)
     except (InputError, ValueError, OSError) as error:
         _fail(str(error).splitlines()[0] if str(error) else type(error).__name__)
+
+
+@main.command()
+@click.argument("target", metavar="RUN_OR_SHARDS")
+@click.option("--policy", default=None,
+              help="Comma-separated policies (expert, constant, idm, pdm, random or run directories). Default: "
+                   "constant,idm for shards; for a training run directory its own policy (these are added).")
+@click.option("--num-scenarios", type=click.IntRange(1), default=4, show_default=True,
+              help="Scenarios shown (the first ones).")
+@click.option("--data", default=None, help="With a run directory: shards to use instead of its held-out split.")
+@click.option("--num-objects", type=click.IntRange(1), default=64, show_default=True, help="Object slots simulated.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--out", type=click.Path(dir_okay=False), default="rollouts.html", show_default=True,
+              help="The self-contained HTML file to write.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def view(target, policy, num_scenarios, data, num_objects, seed, out, quiet):
+    """Web viewer of closed-loop rollouts: logged and simulated SDCs, per-step metrics (docs/viewer.md)."""
+    from vmax_sim.evaluation.report import split_policies
+    from vmax_sim.visualization.view import write_rollout_view
+
+    try:
+        policies = split_policies(policy) if policy is not None else None
+        result = write_rollout_view(target, policies, out=out, num_scenarios=num_scenarios, data=data,
+                                    num_objects=num_objects, seed=seed, progress=not quiet,
+                                    print_fn=lambda line: click.echo(line, err=True))
+    except (InputError, ValueError, OSError) as error:
+        _fail(str(error).splitlines()[0] if str(error) else type(error).__name__)
+    click.echo(f"{result.num_embedded} scenario(s); {result.size_bytes / 1e6:.1f} MB", err=True)
+    click.echo(str(result.out))
 
 
 if __name__ == "__main__":

@@ -26,7 +26,8 @@ def test_evaluate_command_gives_one_line_errors(tmp_path):
     assert result.exit_code == 2
     assert result.output.startswith("error: ") and len(result.output.strip().splitlines()) == 1
     assert "Traceback" not in result.output
-    result = CliRunner().invoke(main, ["evaluate", "--policy", "expert", "--data", str(tmp_path), "--mode", "reactive"])
+    result = CliRunner().invoke(main, ["evaluate", "--policy", "expert", "--data", str(tmp_path),
+                                       "--mode", "adversarial"])
     assert result.exit_code == 2 and "not implemented yet" in result.output
 
 

@@ -124,7 +124,7 @@ def test_callable_policy_gets_an_observation(road_shards):
 
 def test_bad_inputs_give_clear_errors(road_shards, tmp_path):
     with pytest.raises(ValueError, match="not implemented yet"):
-        evaluate("expert", small_data_config(road_shards), mode="reactive")
+        evaluate("expert", small_data_config(road_shards), mode="adversarial")
     with pytest.raises(ValueError, match="unknown policy"):
         evaluate("idm-ish", small_data_config(road_shards))
     with pytest.raises(InputError):

@@ -101,12 +101,13 @@ def episode_fn(name: str):
     env = make_environment(ENV_CONFIG)
     policy = make_policy(name, env)
 
-    @jax.jit
-    @chex.assert_max_traces(n=1)  # every test that runs this policy shares one trace: no recompiles
     def run(state):
         return run_episode(env, policy, state, jax.random.PRNGKey(0), MetricsConfig(), ObservationConfig())
 
-    return run
+    # every test that runs this policy shares one trace: no recompiles. chex counts traces per (call stack,
+    # source, name), so the name carries the policy: two policies first built from one test stay apart
+    run.__name__ = f"run_{name}"
+    return jax.jit(chex.assert_max_traces(run, n=1))
 
 
 def as_state(scenario):

@@ -22,11 +22,14 @@ class DataConfig:
     num_workers: int = 0  # processes converting scenarios (map-index building is ~0.5 s each); 0: in the thread
     drop_remainder: bool = True  # a final short batch would change shapes (and recompile)
     include_map_index: bool = True  # build vmax_sim.map_index structures on the host
+    # per-slot routes of the controllable agents (SimulatorState.agent_paths), for reactive evaluation
+    include_agent_paths: bool = False
+    num_points_per_agent_path: int = 200  # 1 m apart: longer shard paths are cut, shorter padded
     map_index_config: Any = None  # passed to vmax_sim.map_index.build_map_index (None: its default)
 
     def __post_init__(self) -> None:
         for name in ("batch_size", "num_objects", "num_roadgraph_points", "num_paths", "num_points_per_path",
-                     "max_num_lights"):
+                     "max_num_lights", "num_points_per_agent_path"):
             if getattr(self, name) < 1:
                 raise ValueError(f"DataConfig.{name} must be at least 1, got {getattr(self, name)}")
         if self.prefetch < 0 or self.shuffle_buffer < 0 or self.num_workers < 0:

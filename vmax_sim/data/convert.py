@@ -136,6 +136,63 @@ def _paths(scenario: Scenario, num_paths: int, num_points: int) -> Paths:
     )
 
 
+AGENT_PATH_SPACING_M = 1.0  # spacing of the paths built from an agent's logged positions (as the shards')
+
+
+def logged_path(x: np.ndarray, y: np.ndarray, valid: np.ndarray, num_points: int,
+                spacing: float = AGENT_PATH_SPACING_M) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A path through an object's valid logged positions, resampled every `spacing` metres from its
+    first one (the whole log: it starts behind the object's position at the current step).
+
+    x, y, valid (T,) -> xy (num_points, 2), valid (num_points,), arc length (num_points,) float32.
+    A track shorter than `spacing` gives its single first point (users extend it along the heading).
+    """
+    xy = np.stack([x[valid], y[valid]], axis=1).astype(np.float64)
+    out_xy = np.zeros((num_points, 2), np.float32)
+    out_valid = np.zeros(num_points, bool)
+    out_arc = np.zeros(num_points, np.float32)
+    if len(xy) == 0:
+        return out_xy, out_valid, out_arc
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+    keep = np.concatenate([[True], np.diff(cum) > 1e-6])
+    xy, cum = xy[keep], cum[keep]
+    targets = np.arange(0.0, cum[-1] + 1e-6, spacing)[:num_points]
+    points = np.stack([np.interp(targets, cum, xy[:, 0]), np.interp(targets, cum, xy[:, 1])], 1)
+    n = len(points)
+    out_xy[:n], out_valid[:n], out_arc[:n] = points, True, targets
+    return out_xy, out_valid, out_arc
+
+
+def _agent_paths(scenario: Scenario, slots: np.ndarray, num_objects: int, num_points: int) -> Paths:
+    """Per object slot: the shard's lane path of a controllable agent (on_route True) or, when it has
+    none, a path through its logged positions (on_route False); invalid for the SDC and every other
+    object. -> Paths (num_objects, num_points)."""
+    shape = (num_objects, num_points)
+    x, y = np.zeros(shape, np.float32), np.zeros(shape, np.float32)
+    valid, arc = np.zeros(shape, bool), np.zeros(shape, np.float32)
+    from_shards = np.zeros(num_objects, bool)
+    rows = {int(index): row for row, index in enumerate(scenario.agent_path_object_index)}
+    controllable = np.asarray(scenario.is_controllable, bool)
+    for slot, index in enumerate(slots):
+        if index == scenario.sdc_index or not controllable[index]:
+            continue
+        row = rows.get(int(index))
+        if row is not None and scenario.agent_path_valid[row].any():
+            kept = scenario.agent_path_valid[row][:num_points]
+            n = len(kept)
+            x[slot, :n] = np.where(kept, scenario.agent_path_xyz[row, :num_points, 0], 0.0)
+            y[slot, :n] = np.where(kept, scenario.agent_path_xyz[row, :num_points, 1], 0.0)
+            arc[slot, :n] = np.where(kept, scenario.agent_path_arc_length[row, :num_points], 0.0)
+            valid[slot, :n] = kept
+            from_shards[slot] = True
+        else:
+            xy, valid[slot], arc[slot] = logged_path(scenario.x[index], scenario.y[index], scenario.valid[index],
+                                                     num_points)
+            x[slot], y[slot] = xy[:, 0], xy[:, 1]
+    return Paths(x=x, y=y, z=np.zeros(shape, np.float32), ids=np.full(shape, -1, np.int32), valid=valid,
+                 arc_length=arc, on_route=from_shards)
+
+
 def build_map_index_for(roadgraph: RoadgraphPoints, center_xy: np.ndarray, config: DataConfig):
     """The map index of one roadgraph, centred on `center_xy` (2,) (numpy, host).
 
@@ -171,6 +228,8 @@ def scenario_to_numpy_state(scenario: Scenario, config: DataConfig) -> Simulator
         sdc_paths=_paths(scenario, config.num_paths, config.num_points_per_path),
         map_index=build_map_index_for(roadgraph, sdc_xy, config) if config.include_map_index else None,
         timestep=np.asarray(scenario.current_time_index, np.int32),
+        agent_paths=(_agent_paths(scenario, slots, config.num_objects, config.num_points_per_agent_path)
+                     if config.include_agent_paths else None),
     )
 
 

@@ -25,6 +25,9 @@ class SimulatorState:
     sdc_paths: Paths  # (..., num_paths, num_points_per_path)
     map_index: Any  # vmax_sim.map_index.MapIndex with leading (...) dims, or None when not built
     timestep: jax.Array  # (...) int32, index of the current step in [0, num_timesteps)
+    # Paths (..., num_objects, num_points_per_agent_path): a route per object slot for the agents that
+    # reactive evaluation drives (see DataConfig.include_agent_paths), None when not loaded.
+    agent_paths: Any = None
 
     @property
     def batch_shape(self) -> tuple[int, ...]:

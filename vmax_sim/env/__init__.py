@@ -1,7 +1,7 @@
 """Environments over `SimulatorState`: single/multi-agent, wrappers, expert actions, gym adapter."""
 
 from vmax_sim.env.config import EnvConfig
-from vmax_sim.env.environment import Environment, controlled_mask, merge_next_state
+from vmax_sim.env.environment import Environment, controlled_mask, merge_next_state, sdc_log_ended
 from vmax_sim.env.expert import expert_actions, log_actions
 from vmax_sim.env.gym_adapter import Box, GymEnv, sdc_frame_features, zero_reward
 from vmax_sim.env.metrics_adapter import make_environment, make_termination_fn, termination_fns
@@ -37,6 +37,7 @@ __all__ = [
     "merge_next_state",
     "sdc_and_agents_action",
     "sdc_frame_features",
+    "sdc_log_ended",
     "termination_fns",
     "zero_reward",
 ]

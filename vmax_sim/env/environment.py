@@ -49,6 +49,15 @@ def merge_next_state(current: Trajectory, predicted: Trajectory, next_log: Traje
     return jax.tree.map(lambda p, log: jnp.where(is_driven, p, log), predicted, next_log)
 
 
+def sdc_log_ended(state: SimulatorState) -> jax.Array:
+    """The logged SDC has no valid step after the current timestep: its log ended (e.g. a test-split
+    scenario whose future is padded invalid). False for a state without an SDC. (...) bool"""
+    meta = state.object_metadata
+    later = jnp.arange(state.num_timesteps) > state.timestep[..., None, None]  # (..., 1, T)
+    has_future = jnp.any(state.log_trajectory.valid & later & meta.is_sdc[..., None], axis=(-2, -1))
+    return jnp.any(meta.is_sdc, axis=-1) & ~has_future
+
+
 class Environment:
     """Single-scenario environment (any leading batch dims work; see BatchedEnvironment for vmap)."""
 
@@ -98,8 +107,9 @@ class Environment:
         return jnp.asarray(self.termination_fn(state), bool)
 
     def is_truncated(self, state: SimulatorState) -> jax.Array:
-        """The episode reached its length (or the end of the log). (...) bool"""
-        return (state.timestep >= self.config.last_timestep) | state.is_done
+        """The episode reached its length, the end of the log, or the end of the SDC's log (nothing logged
+        to follow or to compare with after it). (...) bool"""
+        return (state.timestep >= self.config.last_timestep) | state.is_done | sdc_log_ended(state)
 
     def is_done(self, state: SimulatorState) -> jax.Array:
         """(...) bool"""

@@ -21,15 +21,14 @@ from vmax_sim.data import DataConfig, scenario_to_numpy_state, stack_states
 from vmax_sim.datatypes import SimulatorState
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.metrics_adapter import make_environment
+from vmax_sim.evaluation.mode_rollout import make_batch_runner
+from vmax_sim.evaluation.modes import MODE_NAMES, PLANNED_MODES, EvalMode, parse_mode  # noqa: F401
 from vmax_sim.evaluation.policies import Policy, make_policy
-from vmax_sim.evaluation.rollout import make_rollout_fn
 from vmax_sim.metrics import MetricsConfig
 from vmax_sim.observation import ObservationConfig
 
-# Modes: how the non-scored objects behave. Only log replay exists so far; reactive (IDM),
-# perturbed-start and adversarial modes plug in here as functions (env_config) -> env_config/env.
-MODES = ("non_reactive",)
-PLANNED_MODES = ("reactive", "perturbed", "adversarial")
+# Modes: how the world around the SDC behaves (vmax_sim.evaluation.modes; adversarial is planned).
+MODES = MODE_NAMES
 SCORE_KEYS = ("accuracy", "accuracy_at_fault", "nuplan_score", "vmax_score")
 
 
@@ -50,11 +49,9 @@ def _named_policy(name: str, env) -> Policy:
     return make_policy(name, env)
 
 
-def _check_mode(mode: str) -> None:
-    if mode in PLANNED_MODES:
-        raise ValueError(f"evaluation mode {mode!r} is not implemented yet; available: {MODES}")
-    if mode not in MODES:
-        raise ValueError(f"unknown evaluation mode {mode!r}; choose one of {MODES}")
+def _check_mode(mode: str | EvalMode, seed: int = 0) -> EvalMode:
+    """The EvalMode of a mode name (or EvalMode); one-line ValueError for an unknown or planned one."""
+    return parse_mode(mode, seed=seed)
 
 
 def _scenarios(data, num_scenarios: int | None) -> Iterator[Scenario]:
@@ -103,9 +100,12 @@ def prepare_batches(data, num_scenarios: int | None = None) -> PreparedBatches:
     return PreparedBatches(batches=tuple(_batches(data, data, num_scenarios)), data_config=data)
 
 
-def _summary(episodes: dict[str, np.ndarray], policy: str, mode: str) -> dict:
+def _summary(episodes: dict[str, np.ndarray], policy: str, mode: str | EvalMode) -> dict:
     means = {k: float(np.mean(v)) for k, v in episodes.items()}
-    summary = {"policy": policy, "mode": mode, "num_episodes": int(len(next(iter(episodes.values()))))}
+    summary = {"policy": policy, "mode": getattr(mode, "name", mode),
+               "num_episodes": int(len(next(iter(episodes.values()))))}
+    if isinstance(mode, EvalMode) and mode.options():
+        summary["mode_options"] = mode.options()
     summary["accuracy"] = means.pop("accurate")
     summary["accuracy_at_fault"] = means.pop("accurate_at_fault")
     summary["nuplan_score"] = means.pop("nuplan_score")
@@ -114,21 +114,26 @@ def _summary(episodes: dict[str, np.ndarray], policy: str, mode: str) -> dict:
     return summary
 
 
-def evaluate(policy, data, mode: str = "non_reactive", *, data_config: DataConfig | None = None,
+def evaluate(policy, data, mode: str | EvalMode = "non_reactive", *, data_config: DataConfig | None = None,
              env_config: EnvConfig | None = None, metrics_config: MetricsConfig | None = None,
              obs_config: ObservationConfig | None = None, num_scenarios: int | None = None,
-             batch_size: int | None = None, seed: int = 0, policy_params=None) -> EvaluationResult:
+             batch_size: int | None = None, seed: int = 0, policy_params=None, on_batch=None) -> EvaluationResult:
     """Runs one episode per scenario and scores it.
 
     policy: "expert", "constant", a `Policy`, or a jittable callable `fn(observation, key)` returning the
-    SDC's (action_dim,) action (see `callable_policy`). data: a `DataConfig` (its path, num_objects,
-    roadgraph and path sizes, batch_size), a shard path, or scenarios. Episodes start at
+    SDC's (action_dim,) action (see `callable_policy`). mode: "non_reactive", "reactive", "perturbed" or an
+    `EvalMode` with its options (vmax_sim.evaluation.modes; a name's perturbation seed is `seed`).
+    data: a `DataConfig` (its path, num_objects, roadgraph and path sizes, batch_size), a shard path, or
+    scenarios. Episodes start at
     env_config.init_steps - 1 (step 10) and run episode_length (80) steps in one jitted `lax.scan`,
     vmapped over the batch; by default an episode ends early on collision, off-road or red light
     (env_config.terminate_on). policy_params: the parameters handed to the policy's action_fn (a
     trained policy's network weights; an argument of the jitted rollout, so new ones never recompile).
+    on_batch: called after every batch as on_batch(scenario ids, host batch, host Rollout, number of real
+    episodes); the Rollout then also holds the simulated trajectories (`Rollout.trajectory`). The failure
+    gallery and the difficulty report use it (vmax_sim.evaluation.gallery / difficulty).
     """
-    _check_mode(mode)
+    mode = _check_mode(mode, seed)
     if isinstance(data, PreparedBatches):
         data_config = data.data_config
     if isinstance(data, DataConfig):
@@ -138,6 +143,8 @@ def evaluate(policy, data, mode: str = "non_reactive", *, data_config: DataConfi
         data_config = dataclasses.replace(data_config, batch_size=batch_size)
     if not data_config.include_map_index:
         data_config = dataclasses.replace(data_config, include_map_index=True)  # the metrics need it
+    if mode.is_reactive and not data_config.include_agent_paths:
+        data_config = dataclasses.replace(data_config, include_agent_paths=True)  # the agents' routes
     env_config = env_config or EnvConfig(max_num_objects=data_config.num_objects)
     if env_config.max_num_objects != data_config.num_objects:
         raise ValueError(f"EnvConfig.max_num_objects ({env_config.max_num_objects}) must equal "
@@ -146,7 +153,7 @@ def evaluate(policy, data, mode: str = "non_reactive", *, data_config: DataConfi
     obs_config = obs_config or ObservationConfig()
     env = _environment(env_config, metrics_config)
     chosen = _named_policy(policy, env) if isinstance(policy, str) else make_policy(policy, env)
-    rollout_fn = make_rollout_fn(env, chosen, metrics_config, obs_config)
+    run_batch = make_batch_runner(env, chosen, metrics_config, obs_config, mode, record_trajectory=on_batch is not None)
 
     params = policy_params
     key = jax.random.PRNGKey(seed)
@@ -155,10 +162,12 @@ def evaluate(policy, data, mode: str = "non_reactive", *, data_config: DataConfi
     batches = data.batches if isinstance(data, PreparedBatches) else _batches(data, data_config, num_scenarios)
     for ids, batch, real in batches:
         key, batch_key = jax.random.split(key)
-        rollout = rollout_fn(jax.device_put(batch), jax.random.split(batch_key, data_config.batch_size), params)
+        rollout = run_batch(jax.device_put(batch), jax.random.split(batch_key, data_config.batch_size), ids, params)
         for name, values in rollout.episode.items():
             collected.setdefault(name, []).append(np.asarray(values)[:real])
         scenario_ids += ids
+        if on_batch is not None:
+            on_batch(ids, batch, jax.device_get(rollout), real)
     if not scenario_ids:
         raise InputError(f"{getattr(data_config, 'path', data)}: no scenarios to evaluate")
     episodes = {name: np.concatenate(parts).astype(np.float32) for name, parts in collected.items()}
@@ -170,6 +179,10 @@ def format_summary(summary: dict) -> str:
     """A small table: episodes, the four scores, then the mean of every episode metric."""
     lines = [f"policy: {summary['policy']}  mode: {summary['mode']}  episodes: {summary['num_episodes']}"]
     lines += [f"  {key:<28}{summary[key]:>10.4f}" for key in SCORE_KEYS]
+    if summary.get("mode_options"):
+        lines[0] += "  (" + ", ".join(f"{k}={v}" for k, v in summary["mode_options"].items()) + ")"
+    if summary["metrics"].get("other_collision") is not None:  # reactive mode: among the non-SDC objects
+        lines.append(f"  {'other_collisions (non-SDC)':<28}{summary['metrics']['other_collision']:>10.4f}")
     lines.append("  metric means:")
     for key, value in summary["metrics"].items():
         lines.append(f"  {key:<28}{'n/a' if value is None else format(value, '>10.4f'):>10}")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import io
 import math
 import time
@@ -49,6 +50,11 @@ TABLE_ROWS: tuple[tuple[str, str], ...] = (
     ("Accuracy at-fault", "accuracy_at_fault"),
     ("nuPlan score", "nuplan_score"),
     ("V-Max score", "vmax_score"),
+)
+
+# rows shown only when a policy's summary has them (reactive mode: vmax_sim.evaluation.mode_rollout)
+MODE_ROWS: tuple[tuple[str, str], ...] = (
+    ("Other collisions (non-SDC)", "other_collision"),
 )
 
 
@@ -107,23 +113,28 @@ def check_entries(entries: Sequence[str]) -> None:
 
 def compare_policies(entries: Sequence[str], data: str | None, mode: str = "non_reactive", *,
                      num_scenarios: int | None = None, batch_size: int = 8, num_objects: int = 64, seed: int = 0,
-                     progress: bool = True, print_fn: Callable[[str], None] = print) -> list[PolicyRun]:
+                     progress: bool = True, print_fn: Callable[[str], None] = print,
+                     on_batch: Callable | None = None) -> list[PolicyRun]:
     """Evaluates every entry (a POLICY_NAMES name or a training run directory) on the same scenarios.
 
     Named policies share one pass over `data` (each batch converted once, then run by every policy);
     run directories go through `evaluate_run` (default data: the run's held-out split). A tqdm bar
-    counts the batches when `progress`. Returns the columns in the order given.
+    counts the batches when `progress`. Returns the columns in the order given. on_batch(column, ids,
+    host batch, host Rollout with trajectories, number of real episodes) is called after every batch of
+    every entry (column: its index in `entries`), see `evaluate`.
     """
-    _check_mode(mode)
+    mode = _check_mode(mode, seed)  # an EvalMode: a name gets `seed` as its perturbation seed
     check_entries(entries)
     named = [entry for entry in entries if not is_run_directory(entry)]
     runs: dict[int, PolicyRun] = {}
     if named:
         if not data:
             raise InputError("--data is required for the policies " + ", ".join(sorted(set(named))))
-        config = DataConfig(path=data, batch_size=batch_size, num_objects=num_objects)
+        config = DataConfig(path=data, batch_size=batch_size, num_objects=num_objects,
+                            include_agent_paths=mode.is_reactive)
         for index, run in zip([i for i, e in enumerate(entries) if e in named],
-                              _evaluate_named(named, config, mode, num_scenarios, seed, progress)):
+                              _evaluate_named(named, config, mode, num_scenarios, seed, progress,
+                                              _column_hooks(entries, named, on_batch))):
             runs[index] = run
     for index, entry in enumerate(entries):
         if index in runs:
@@ -132,7 +143,9 @@ def compare_policies(entries: Sequence[str], data: str | None, mode: str = "non_
 
         print_fn(f"evaluating the run {entry} ...")
         start = time.perf_counter()
-        result = evaluate_run(entry, data, mode=mode, num_scenarios=num_scenarios, batch_size=batch_size)
+        hook = None if on_batch is None else functools.partial(on_batch, index)
+        result = evaluate_run(entry, data, mode=mode, num_scenarios=num_scenarios, batch_size=batch_size,
+                              on_batch=hook)
         runs[index] = PolicyRun(result.summary["policy"], result, time.perf_counter() - start,
                                 result.summary["num_episodes"])  # includes compilation
     ordered = [runs[i] for i in range(len(entries))]
@@ -140,8 +153,14 @@ def compare_policies(entries: Sequence[str], data: str | None, mode: str = "non_
     return [dataclasses.replace(run, name=name) for run, name in zip(ordered, names)]
 
 
+def _column_hooks(entries: Sequence[str], named: Sequence[str], on_batch: Callable | None) -> list:
+    """on_batch bound to the column index of each named entry (None each without a hook)."""
+    columns = [i for i, entry in enumerate(entries) if entry in named]
+    return [None if on_batch is None else functools.partial(on_batch, column) for column in columns]
+
+
 def _evaluate_named(names: Sequence[str], config: DataConfig, mode: str, num_scenarios: int | None, seed: int,
-                    progress: bool) -> list[PolicyRun]:
+                    progress: bool, hooks: Sequence | None = None) -> list[PolicyRun]:
     total = None if num_scenarios is None else math.ceil(num_scenarios / config.batch_size)
     batches = _batches(config, config, num_scenarios)
     if progress:
@@ -156,7 +175,7 @@ def _evaluate_named(names: Sequence[str], config: DataConfig, mode: str, num_sce
         prepared = PreparedBatches(batches=(batch,), data_config=config)
         for i, name in enumerate(names):
             start = time.perf_counter()
-            part = evaluate(name, prepared, mode, seed=seed * 1_000_003 + number)
+            part = evaluate(name, prepared, mode, seed=seed * 1_000_003 + number, on_batch=hooks[i] if hooks else None)
             if number > 0:  # the first batch compiles
                 seconds[i] += time.perf_counter() - start
                 warm[i] += batch[2]
@@ -176,8 +195,10 @@ def _merge(name: str, mode: str, parts: Sequence[EvaluationResult]) -> Evaluatio
 def comparison_rows(runs: Sequence[PolicyRun]) -> list[tuple[str, list[float | None]]]:
     """[(row label, [value in % per policy])] in TABLE_ROWS order."""
     rows = []
-    for label, key in TABLE_ROWS:
+    for label, key in TABLE_ROWS + MODE_ROWS:
         values = [summary_value(run.result.summary, key) for run in runs]
+        if (label, key) in MODE_ROWS and all(v is None for v in values):
+            continue  # a mode's own row only in that mode
         rows.append((label, [None if v is None else 100.0 * v for v in values]))
     return rows
 

@@ -81,7 +81,7 @@ def _window_points(config) -> int:
 
 
 def evaluate_run(run_dir: str | Path, data: str | None = None, mode: str = "non_reactive",
-                 num_scenarios: int | None = None, batch_size: int = 8, step: int | None = None):
+                 num_scenarios: int | None = None, batch_size: int = 8, step: int | None = None, on_batch=None):
     """Evaluates a training run's policy on `data` (default: the run's held-out split), with the run's
     observation and environment settings."""
     from vmax_sim.evaluation.evaluate import evaluate
@@ -92,4 +92,5 @@ def evaluate_run(run_dir: str | Path, data: str | None = None, mode: str = "non_
     path = data or resolve_data(config, print)[1]
     return evaluate(loaded.policy, data_config(config, path, batch_size=batch_size), mode=mode,
                     env_config=components(config)[0].env_config,
-                    obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params)
+                    obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params,
+                    on_batch=on_batch)

@@ -1,0 +1,244 @@
+"""A fast index of shard records for the viewer: where each record is and its scenario id.
+
+`ShardIndex.build` walks the TFRecord framing with positioned reads (`os.pread`) and skims each
+tf.Example for `scenario/id` without reading or decoding the rest of the record: it reads only the
+frame headers and the first bytes of each map entry, and jumps over the values. A 1,000-scenario
+synthetic set (2.6 GB on disk) is indexed in a fraction of a second. Records are decoded (and
+validated, and CRC-checked) only when one is opened: `ShardIndex.check`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import struct
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+from scenariomax.inspect import summarize_scenario
+from scenariomax.io.tfrecord import MAX_RECORD_BYTES, masked_crc32c
+from scenariomax.sources.base import InputError
+from scenariomax.validate import RecordCheck, check_record, resolve_files
+
+_HEADER = struct.Struct("<QI")
+_ID_KEY = b"scenario/id"
+_PEEK = 96  # bytes read at each map entry: tag, length, key tag, key length and a key of up to ~80 bytes
+MAX_ENTRIES_SKIMMED = 4096
+SKIM_THREADS = 16
+
+
+@dataclasses.dataclass(frozen=True)
+class IndexEntry:
+    file: int  # index into ShardIndex.files
+    record: int  # record index within the file
+    offset: int  # byte offset of the record's payload
+    length: int  # payload bytes
+    scenario_id: str  # "" when the record holds none that the skim could find
+
+
+def _varint(buf: bytes, pos: int) -> tuple[int, int]:
+    result = shift = 0
+    while True:
+        if pos >= len(buf) or shift > 63:
+            raise ValueError("bad varint")
+        byte = buf[pos]
+        pos += 1
+        result |= (byte & 0x7F) << shift
+        if byte < 0x80:
+            return result, pos
+        shift += 7
+
+
+def _skip_field(wire_type: int, buf: bytes, pos: int) -> int:
+    """Position after a field's value (the tag already read), or ValueError."""
+    if wire_type == 0:
+        return _varint(buf, pos)[1]
+    if wire_type == 1:
+        return pos + 8
+    if wire_type == 2:
+        length, pos = _varint(buf, pos)
+        return pos + length
+    if wire_type == 5:
+        return pos + 4
+    raise ValueError(f"unsupported wire type {wire_type}")
+
+
+def _bytes_value(feature: bytes) -> str | None:
+    """The first value of a Feature's bytes_list, or None."""
+    pos = 0
+    while pos < len(feature):
+        tag, pos = _varint(feature, pos)
+        if tag == 0x0A:  # bytes_list
+            length, pos = _varint(feature, pos)
+            inner, end = feature[pos:pos + length], pos + length
+            ipos = 0
+            while ipos < len(inner):
+                itag, ipos = _varint(inner, ipos)
+                if itag == 0x0A:
+                    n, ipos = _varint(inner, ipos)
+                    return inner[ipos:ipos + n].decode("utf-8", "replace")
+                ipos = _skip_field(itag & 7, inner, ipos)
+            pos = end
+        else:
+            pos = _skip_field(tag & 7, feature, pos)
+    return None
+
+
+def _entry_id(entry: bytes) -> str:
+    pos = 0
+    while pos < len(entry):
+        field, pos = _varint(entry, pos)
+        if field == 0x12:  # the Feature value
+            n, pos = _varint(entry, pos)
+            return _bytes_value(entry[pos:pos + n]) or ""
+        pos = _skip_field(field & 7, entry, pos)
+    return ""
+
+
+def skim_scenario_id(fd: int, offset: int, length: int) -> str:
+    """`scenario/id` of the tf.Example at [offset, offset + length) of file descriptor `fd`, reading only
+    the map entries' heads; "" when the record is not a tf.Example or has no id."""
+    try:
+        head = os.pread(fd, min(32, length), offset)
+        tag, pos = _varint(head, 0)
+        if tag != 0x0A:  # Example.features
+            return ""
+        features_length, pos = _varint(head, pos)
+        cursor, end = offset + pos, min(offset + pos + features_length, offset + length)
+        for _ in range(MAX_ENTRIES_SKIMMED):
+            if cursor >= end:
+                return ""
+            peek = os.pread(fd, min(_PEEK, end - cursor), cursor)
+            tag, pos = _varint(peek, 0)
+            if tag != 0x0A:  # not a map entry: skip an unknown field
+                cursor += _skip_field(tag & 7, peek, pos)
+                continue
+            entry_length, pos = _varint(peek, pos)  # Features.feature map entry: key = 1, value = 2
+            key_tag, kpos = _varint(peek, pos)
+            if key_tag == 0x0A:
+                key_length, kpos = _varint(peek, kpos)
+                if key_length == len(_ID_KEY) and peek[kpos:kpos + key_length] == _ID_KEY:
+                    return _entry_id(os.pread(fd, entry_length, cursor + pos))
+            cursor += pos + entry_length
+    except (ValueError, OSError, IndexError):
+        return ""
+    return ""
+
+
+def _walk_file(path: Path, file_index: int) -> tuple[list[IndexEntry], str]:
+    """(entries, error message or "") for one TFRecord file, reading frame headers only."""
+    frames: list[tuple[int, int]] = []  # (payload offset, payload length)
+    ids: list[str] = []
+    error_text = ""
+    try:
+        with open(path, "rb") as stream:
+            fd = stream.fileno()
+            size = os.fstat(fd).st_size
+            offset = 0
+            while offset < size:
+                header = os.pread(fd, _HEADER.size, offset)
+                length, length_crc = _HEADER.unpack(header) if len(header) == _HEADER.size else (0, None)
+                if length_crc is None:
+                    error_text = f"{path}: truncated record header at byte {offset}"
+                elif masked_crc32c(header[:8]) != length_crc:
+                    error_text = f"{path}: corrupted record length (CRC mismatch) at byte {offset}"
+                elif length > MAX_RECORD_BYTES or offset + _HEADER.size + length + 4 > size:
+                    error_text = f"{path}: truncated record at byte {offset}"
+                if error_text:
+                    break  # the records before the damage stay listed
+                frames.append((offset + _HEADER.size, length))
+                offset += _HEADER.size + length + 4
+            # The skims are independent small reads: overlap them (os.pread releases the GIL), which is what
+            # makes a cold-cache index of a large dataset fast.
+            with ThreadPoolExecutor(max_workers=SKIM_THREADS) as pool:
+                ids = list(pool.map(lambda frame: skim_scenario_id(fd, *frame), frames))
+    except OSError as error:
+        error_text = f"{path}: cannot read ({error.strerror or error})"
+    ids += [""] * (len(frames) - len(ids))  # a read that failed part-way: the frames found stay listed
+    entries = [IndexEntry(file_index, i, data, length, scenario_id)
+               for i, ((data, length), scenario_id) in enumerate(zip(frames, ids))]
+    return entries, error_text
+
+
+@dataclasses.dataclass(frozen=True)
+class ShardIndex:
+    path: str
+    files: tuple[Path, ...]
+    entries: tuple[IndexEntry, ...]
+    file_errors: tuple[str, ...]  # one line per damaged file (its records before the damage are indexed)
+
+    @classmethod
+    def build(cls, path: str | os.PathLike) -> ShardIndex:
+        """Indexes every record under `path` (directory, file or glob). InputError when there is nothing."""
+        files = resolve_files(path)
+        entries: list[IndexEntry] = []
+        errors = []
+        for number, file in enumerate(files):
+            found, error = _walk_file(file, number)
+            entries += found
+            if error:
+                errors.append(error)
+        if not entries:
+            raise InputError(errors[0] if errors else f"{path}: no records in {len(files)} file(s)")
+        return cls(str(path), tuple(files), tuple(entries), tuple(errors))
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    def find(self, scenario_id: str) -> int:
+        """Position of the first record with this scenario id; InputError naming the path when absent."""
+        for position, entry in enumerate(self.entries):
+            if entry.scenario_id == scenario_id:
+                return position
+        raise InputError(f"{self.path}: no scenario with id {scenario_id!r} (among {len(self.entries)} records)")
+
+    def read(self, position: int) -> bytes:
+        """The payload of record `position`, CRC-checked (RecordError-like ValueError with the place)."""
+        entry = self.entries[position]
+        file = self.files[entry.file]
+        with open(file, "rb") as stream:
+            data = os.pread(stream.fileno(), entry.length + 4, entry.offset)
+        if len(data) < entry.length + 4:
+            raise ValueError(f"{file}: record {entry.record} is truncated")
+        payload, (crc,) = data[:-4], struct.unpack("<I", data[-4:])
+        if masked_crc32c(payload) != crc:
+            raise ValueError(f"{file}: record {entry.record}: corrupted record data (CRC mismatch)")
+        return payload
+
+    def check(self, position: int) -> RecordCheck:
+        """Validates and decodes record `position` (see `scenariomax.validate.check_record`)."""
+        try:
+            data = self.read(position)
+        except (ValueError, OSError) as error:
+            return RecordCheck(self.entries[position].scenario_id, (str(error),), None, None)
+        return check_record(data)
+
+    def describe(self, position: int) -> dict:
+        entry = self.entries[position]
+        return {"id": entry.scenario_id or f"(record {entry.record})", "file": self.files[entry.file].name,
+                "record": entry.record}
+
+
+def compact_summary(check: RecordCheck) -> dict:
+    """What the page's list and summary panel show for one record: the `inspect` numbers of the scenario
+    and the problems `validate` found."""
+    out: dict = {"problems": list(check.problems)}
+    if check.scenario is None:
+        return out
+    full = summarize_scenario(check.scenario)
+    sdc = full["sdc"] or {}
+    speeds = sdc.get("speeds") or []
+    out.update({
+        "dataset": full["source_dataset"] or "(unset)",
+        "objects": full["num_objects"], "objects_by_type": full["objects_by_type"],
+        "lights": full["num_lights"], "light_states_now": full["light_states_now"],
+        "paths": full["num_paths"], "on_route_paths": full["num_on_route_paths"],
+        "controllable": full["num_controllable"], "roadgraph_points": full["roadgraph_valid_points"],
+        "roadgraph_by_type": full["roadgraph_by_type"],
+        "sdc_speed_mean": round(sum(speeds) / len(speeds), 2) if speeds else None,
+        "sdc_distance_m": round(sdc["distance_m"], 1) if sdc else None,
+    })
+    return out
+
+
+__all__ = ["IndexEntry", "ShardIndex", "compact_summary", "skim_scenario_id"]
