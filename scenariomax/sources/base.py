@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import fnmatch
 import glob
+import json
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Protocol, Union
@@ -69,3 +70,18 @@ def expand_inputs(src: str, pattern: str, description: str) -> list[str]:
     if not files:
         raise InputError(f"{src}: no {description} ({pattern}) found (no such file, directory or glob match)")
     return files
+
+
+def parse_json(data: bytes) -> object:
+    """UTF-8 JSON bytes -> the parsed document. ValueError with a one-line reason (no file name: the caller
+    adds it) when the bytes are not UTF-8 or not JSON."""
+    try:
+        return json.loads(data.decode("utf-8"))
+    except UnicodeDecodeError as error:
+        raise ValueError(f"not UTF-8 text ({error.reason} at byte {error.start})") from None
+    except json.JSONDecodeError as error:
+        raise ValueError(f"invalid JSON: {error.msg} at line {error.lineno} column {error.colno}") from None
+    except RecursionError:
+        raise ValueError("invalid JSON: nesting too deep") from None
+    except ValueError as error:  # e.g. an integer literal longer than Python's digit limit
+        raise ValueError(f"invalid JSON: {' '.join(str(error).split())}") from None

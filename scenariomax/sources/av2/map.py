@@ -13,7 +13,6 @@ direction, mark types, lane graph links), `pedestrian_crossings` (two parallel e
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -23,6 +22,7 @@ import numpy as np
 from scenariomax import schema as sch
 from scenariomax.enrich.roadgraph import LaneLinks, MapPolyline
 from scenariomax.sources.av2.errors import Av2FormatError
+from scenariomax.sources.base import parse_json
 
 LANE_TYPES = {"VEHICLE": sch.RG_LANE_SURFACE_STREET, "BUS": sch.RG_LANE_SURFACE_STREET,
               "BIKE": sch.RG_LANE_BIKE}
@@ -300,10 +300,6 @@ def parse_map(archive: Any, lane_speed_limit: float = -1.0) -> Av2Map:
 def load_map_json(data: bytes) -> Any:
     """Bytes of the archive -> parsed JSON. Raises Av2FormatError (one line) when not JSON."""
     try:
-        return json.loads(data.decode("utf-8"))
-    except UnicodeDecodeError as err:
-        raise Av2FormatError(f"not UTF-8 text ({err.reason} at byte {err.start})") from None
-    except json.JSONDecodeError as err:
-        raise Av2FormatError(f"invalid JSON: {err.msg} at line {err.lineno} column {err.colno}") from None
-    except RecursionError:
-        raise Av2FormatError("invalid JSON: nesting too deep") from None
+        return parse_json(data)
+    except ValueError as err:
+        raise Av2FormatError(str(err)) from None

@@ -28,14 +28,13 @@ where present, whatever the label says (see `convert.py`).
 from __future__ import annotations
 
 import dataclasses
-import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import NoReturn
 
 import numpy as np
 
-from scenariomax.sources.base import InputError
+from scenariomax.sources.base import InputError, parse_json
 
 LAYOUT_NOCTURNE = "nocturne"
 LAYOUT_GPUDRIVE_3D = "gpudrive-3d"
@@ -60,15 +59,9 @@ def read_json(path: str) -> object:
     except OSError as error:
         raise InputError(f"{path}: cannot read ({error.strerror or error})") from None
     try:
-        return json.loads(data.decode("utf-8"))
-    except UnicodeDecodeError as error:
-        raise InputError(f"{path}: not UTF-8 text ({error.reason} at byte {error.start})") from None
-    except json.JSONDecodeError as error:
-        raise InputError(f"{path}: invalid JSON: {error.msg} at line {error.lineno} column {error.colno}") from None
-    except RecursionError:
-        raise InputError(f"{path}: invalid JSON: nesting too deep") from None
-    except ValueError as error:  # e.g. an integer literal longer than Python's digit limit
-        raise InputError(f"{path}: invalid JSON: {' '.join(str(error).split())}") from None
+        return parse_json(data)
+    except ValueError as error:
+        raise InputError(f"{path}: {error}") from None
 
 
 def _what_it_is(doc: object) -> str:
