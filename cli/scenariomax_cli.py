@@ -17,16 +17,15 @@ class _OneLineErrors(click.Group):
 
     def invoke(self, ctx):
         from scenariomax.codec import SchemaError
+        from scenariomax.errors import InputError, one_line
         from scenariomax.io.tfrecord import RecordError
         from scenariomax.pipeline import ConversionError
         from scenariomax.shards import ShardReadError
-        from scenariomax.sources.base import InputError
 
         try:
             return super().invoke(ctx)
-        except (ConversionError, InputError, RecordError, ShardReadError, SchemaError, FileNotFoundError,
-                NotADirectoryError, PermissionError) as error:
-            raise click.ClickException(str(error).splitlines()[0] if str(error) else type(error).__name__) from error
+        except (ConversionError, InputError, RecordError, ShardReadError, SchemaError, OSError) as error:
+            raise click.ClickException(one_line(error)) from error
 
 
 @click.group(cls=_OneLineErrors)
@@ -39,40 +38,58 @@ def _sizes(num_objects: int, roadgraph_points: int) -> Sizes:
     return Sizes(num_objects=num_objects, num_roadgraph=roadgraph_points)
 
 
+def _without_path(path: str, message: str) -> str:
+    """`message` without its leading `path: ` (repeated when layers each added it): the caller prints the path
+    itself, once."""
+    prefix = f"{path}: "
+    while message.startswith(prefix):
+        message = message[len(prefix):]
+    return message
+
+
 def _print_summary(result) -> None:
     width = max(len(label) for label, _ in result.summary_rows())
     click.echo("")
     for label, value in result.summary_rows():
         click.echo(f"  {label:<{width}}  {value}")
     for failure in result.failures[:10]:
-        click.echo(f"  failed: {failure['unit']} [{failure['scenario']}]: {failure['reason']}", err=True)
+        reason = _without_path(failure["unit"], failure["reason"])
+        click.echo(f"  failed: {failure['unit']} [{failure['scenario']}]: {reason}", err=True)
     if len(result.failures) > 10:
         click.echo(f"  ... and {len(result.failures) - 10} more failures (see manifest.json)", err=True)
 
 
-def _run_conversion(source, out, workers, shard_size, resume, split, engine, address, sizes, enrich, num_paths,
-                    points_per_path) -> None:
+def _run_conversion(source, out, workers, shard_size, resume, overwrite, split, engine, address, sizes, enrich,
+                    num_paths, points_per_path) -> None:
     from scenariomax.enrich.transform import make_transform
     from scenariomax.pipeline import ConvertSettings, convert
 
     transform, transform_settings = make_transform(enabled=enrich, num_paths=num_paths,
                                                    points_per_path=points_per_path)
     settings = ConvertSettings(
-        out=Path(out), split=split, shard_size=shard_size, workers=workers, resume=resume, sizes=sizes,
-        engine=engine, ray_address=address, progress=sys.stderr.isatty() or True,
+        out=Path(out), split=split, shard_size=shard_size, workers=workers, resume=resume, overwrite=overwrite,
+        sizes=sizes, engine=engine, ray_address=address, progress=True,
         transform=transform, transform_settings=transform_settings,
     )
     result = convert(source, settings)
     _print_summary(result)
+    if result.num_scenarios == 0:
+        why = "see the failures above" if result.num_failures else "they hold no scenario"
+        click.echo(f"error: no scenario could be converted from the {result.num_units} input(s) ({why}); "
+                   "check that they are what the command expects", err=True)
     if not result.ok:
         sys.exit(1)
 
 
 _common_pipeline_options = [
     click.option("--out", required=True, type=click.Path(file_okay=False), help="Output directory."),
-    click.option("--workers", type=int, default=None, help="Worker processes (default: one per core)."),
-    click.option("--shard-size", type=int, default=1000, show_default=True, help="Scenarios per shard."),
+    click.option("--workers", type=click.IntRange(min=1), default=None,
+                 help="Worker processes (default: one per core)."),
+    click.option("--shard-size", type=click.IntRange(min=1), default=1000, show_default=True,
+                 help="Scenarios per shard."),
     click.option("--resume", is_flag=True, help="Continue an interrupted conversion in --out."),
+    click.option("--overwrite", is_flag=True,
+                 help="Replace the conversion in --out (deletes only the files its manifest.json lists)."),
     click.option("--split", default="train", show_default=True, help="Split name used in shard file names."),
     click.option("--engine", type=click.Choice(["process", "ray"]), default="process", show_default=True),
     click.option("--address", default=None, help="Ray cluster address (with --engine ray)."),
@@ -90,8 +107,9 @@ def _pipeline_options(fn):
 @main.command()
 @click.option("--dataset", type=click.Choice(list(DATASETS)),
               default="synthetic", show_default=True)
-@click.option("--src", default=None, help="Raw input files, directory or glob (real datasets).")
-@click.option("--maps", default=None, help="nuPlan maps root.")
+@click.option("--src", default=None,
+              help="Raw input files, directory or glob (real datasets; nuPlan: default $NUPLAN_DB_FILES).")
+@click.option("--maps", default=None, help="nuPlan maps root (default $NUPLAN_MAPS_ROOT).")
 @click.option("--num-scenarios", type=int, default=100, show_default=True, help="Synthetic: how many.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Synthetic: random seed.")
 @click.option("--stride-steps", type=int, default=None, help="nuPlan: also cut a scenario every N steps.")
@@ -100,7 +118,7 @@ def _pipeline_options(fn):
 @click.option("--no-enrich", is_flag=True, help="Skip enrichment (paths, controllable labels, lights).")
 @_pipeline_options
 def convert(dataset, src, maps, num_scenarios, seed, stride_steps, num_objects, roadgraph_points, no_enrich,
-            out, workers, shard_size, resume, split, engine, address, num_paths, points_per_path):
+            out, workers, shard_size, resume, overwrite, split, engine, address, num_paths, points_per_path):
     """Convert a dataset (or generate synthetic scenarios) into shards + manifest.json."""
     from scenariomax.sources.registry import make_source
 
@@ -108,20 +126,21 @@ def convert(dataset, src, maps, num_scenarios, seed, stride_steps, num_objects, 
                   num_points_per_path=points_per_path)
     source = make_source(dataset, src=src, sizes=sizes, num_scenarios=num_scenarios, seed=seed, maps=maps,
                          stride_steps=stride_steps)
-    _run_conversion(source, out, workers, shard_size, resume, split, engine, address, sizes, not no_enrich,
-                    num_paths, points_per_path)
+    _run_conversion(source, out, workers, shard_size, resume, overwrite, split, engine, address, sizes,
+                    not no_enrich, num_paths, points_per_path)
 
 
 @main.command("build-sdc-paths")
 @click.argument("src")
 @_pipeline_options
-def build_sdc_paths(src, out, workers, shard_size, resume, split, engine, address, num_paths, points_per_path):
+def build_sdc_paths(src, out, workers, shard_size, resume, overwrite, split, engine, address, num_paths,
+                    points_per_path):
     """Enrich existing shards or raw WOMD tf.Example files with SDC paths (and the other enrichments)."""
     from scenariomax.sources.shard_records import ShardRecordsSource
 
     sizes = Sizes(num_paths=num_paths, num_points_per_path=points_per_path)
-    _run_conversion(ShardRecordsSource(src=src), out, workers, shard_size, resume, split, engine, address, sizes,
-                    True, num_paths, points_per_path)
+    _run_conversion(ShardRecordsSource(src=src), out, workers, shard_size, resume, overwrite, split, engine,
+                    address, sizes, True, num_paths, points_per_path)
 
 
 @main.command()
@@ -132,33 +151,43 @@ def build_sdc_paths(src, out, workers, shard_size, resume, split, engine, addres
 @click.option("--max-records", type=int, default=None, help="Only look at the first N records.")
 def inspect(path, as_json, render, scenario_id, max_records):
     """Statistics, schema validation and pictures of shards."""
-    from scenariomax.inspect import format_report, inspect_shards
+    from scenariomax.inspect import format_report, inspect_shards, inspection_ok, load_scenario
 
-    stats = inspect_shards(path, scenario_id=scenario_id, max_records=max_records)
+    stats = inspect_shards(path, scenario_id=scenario_id, max_records=max_records)  # unknown --scenario: fails first
     click.echo(json.dumps(stats, indent=1) if as_json else format_report(stats))
+    for warning in stats["manifest"]["warnings"]:
+        click.echo(f"warning: {warning}", err=True)
     if render:
         from scenariomax.render import render_scenario
-        from scenariomax.shards import read_shards
 
-        scenario = next((s for s in read_shards(path) if scenario_id in (None, s.scenario_id)), None)
-        if scenario is None:
-            raise click.ClickException(f"{path}: no scenario with id {scenario_id!r}")
+        scenario = load_scenario(path, scenario_id)
         written = render_scenario(scenario, render)
         click.echo(f"rendered {scenario.scenario_id} -> {written}", err=True)
+    if not inspection_ok(stats):
+        num_bad, manifest_problems = stats["validation"]["num_bad_records"], len(stats["manifest"]["problems"])
+        click.echo(f"{path}: {num_bad} bad record(s), {manifest_problems} manifest problem(s); "
+                   "`scenariomax validate` lists them all", err=True)
+        sys.exit(1)
 
 
 @main.command()
 @click.argument("path")
-def validate(path):
-    """Exit 0 if every record matches the schema; else one line per bad record and exit 1."""
-    from scenariomax.validate import validate_shards
+@click.option("--deep", is_flag=True, help="Also check every value against plausible physical ranges "
+                                           "(docs/validate.md).")
+def validate(path, deep):
+    """Exit 0 if every record matches the schema and the folder is the complete output its manifest.json
+    lists (shards, record counts, sha256, unique scenario ids); else one line per problem and exit 1."""
+    from scenariomax.validate import format_bad, validate_shards
 
-    report = validate_shards(path)
-    for file, index, scenario_id, reason in report.bad:
-        where = f"{file}: record {index}" if index is not None and index >= 0 else f"{file}"
-        click.echo(f"{where}{f' ({scenario_id})' if scenario_id else ''}: {reason}")
-    click.echo(f"{report.num_records} records in {report.num_files} files: "
-               f"{'all valid' if not report.bad else f'{len(report.bad)} problems'}", err=True)
+    report = validate_shards(path, deep=deep)
+    for entry in report.bad:
+        click.echo(format_bad(entry))
+    for warning in report.warnings:
+        click.echo(f"warning: {warning}", err=True)
+    verdict = f"{len(report.bad)} problems" if report.bad else "all valid"
+    if report.warnings and not report.bad:
+        verdict += " (completeness not checked: no manifest.json)"
+    click.echo(f"{report.num_records} records in {report.num_files} files: {verdict}", err=True)
     sys.exit(1 if report.bad else 0)
 
 

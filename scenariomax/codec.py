@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenariomax.io.example import decode_example, encode_example
+from scenariomax.io.example import ExampleError, decode_example, encode_example
+from scenariomax.io.record_kind import WOMD_SCENARIO_NOT_A_SHARD, looks_like_womd_scenario
 from scenariomax.scenario import Scenario
 from scenariomax.schema import FeatureSpec, Sizes, default_sizes, load_schema
 
@@ -157,4 +158,13 @@ def features_to_scenario(features: dict, sizes: Sizes | None = None) -> Scenario
 
 
 def decode_scenario(data: bytes, sizes: Sizes | None = None) -> Scenario:
-    return features_to_scenario(decode_example(data), sizes)
+    # A raw WOMD Scenario proto is not a tf.Example: say what the file is, not "missing 71 features".
+    try:
+        features = decode_example(data)
+    except ExampleError:
+        if looks_like_womd_scenario(data):
+            raise SchemaError(WOMD_SCENARIO_NOT_A_SHARD) from None
+        raise
+    if not features and looks_like_womd_scenario(data):
+        raise SchemaError(WOMD_SCENARIO_NOT_A_SHARD)
+    return features_to_scenario(features, sizes)

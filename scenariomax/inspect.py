@@ -2,22 +2,33 @@
 
 `inspect_shards` streams records once, validates each (reusing `scenariomax.validate`), summarises
 every decodable scenario with the pure `summarize_scenario`, and folds the summaries into
-JSON-serialisable totals. `format_report` turns those into an aligned text table.
+JSON-serialisable totals. `format_report` turns those into an aligned text table. Where a folder holds a
+`manifest.json`, the report says whether the folder is the complete output it lists (the cheap checks plus
+record counts; `scenariomax validate` adds sha256), and `inspection_ok` is False for any problem found.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
+import struct
 from collections import Counter
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
+from scenariomax.errors import InputError
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes, load_schema
-from scenariomax.sources.base import InputError
-from scenariomax.validate import join_reasons, resolve_files, scan_records
+from scenariomax.validate import (
+    duplicate_problem,
+    find_files_to_check,
+    format_bad,
+    join_reasons,
+    manifest_findings,
+    scan_records,
+)
 
 MAX_LISTED_PROBLEMS = 5
 _DIGITS = 4
@@ -216,17 +227,25 @@ def inspect_shards(path: str | os.PathLike, scenario_id: str | None = None,
                    max_records: int | None = None) -> dict:
     """Streams the records under `path` once and returns JSON-serialisable statistics.
 
-    Records that fail validation are counted under "validation"; those that still decode are
-    included in the statistics. With `scenario_id`, a "scenario" block describes that scenario.
+    Records that fail validation (or repeat a scenario id) are counted under "validation"; those that
+    still decode are included in the statistics. "manifest" lists what the folders' manifest.json files
+    say is wrong. With `scenario_id`, a "scenario" block describes that scenario; InputError, before any
+    record is validated, when no record holds that id.
     """
-    files = resolve_files(path)
+    files = find_files_to_check(path)
+    if scenario_id is not None:
+        require_scenario(path, files, scenario_id)
     totals = _Totals()
     sizes_seen: Counter = Counter()
     num_records, num_bad, first_problems = 0, 0, []
     block = None
-    for item in scan_records(files, max_records):
+    digests: dict | None = {} if max_records is None else None  # record counts only mean something in full
+    first_seen: dict[str, tuple[str, int]] = {}
+    for item in scan_records(files, max_records, digests=digests):
         check = item.check
         problems = (item.framing_error,) if check is None else check.problems
+        duplicate = duplicate_problem(first_seen, item)
+        problems = (*problems, duplicate) if duplicate else problems
         if problems:
             num_bad += 1
             if len(first_problems) < MAX_LISTED_PROBLEMS:
@@ -252,6 +271,7 @@ def inspect_shards(path: str | os.PathLike, scenario_id: str | None = None,
         "sizes": [{"sizes": dict(key), "num_records": count} for key, count in sizes_seen.most_common()],
         **_totals_to_dict(totals),
         "validation": {"num_bad_records": num_bad, "first_problems": first_problems},
+        "manifest": _manifest_block(manifest_findings(path, files, digests)),
     }
     if max_records is not None:
         stats["max_records"] = max_records
@@ -260,10 +280,53 @@ def inspect_shards(path: str | os.PathLike, scenario_id: str | None = None,
     return stats
 
 
+def _manifest_block(findings) -> dict:
+    return {"num_checked": findings.num_checked, "problems": [format_bad(problem) for problem in findings.problems],
+            "warnings": list(findings.warnings)}
+
+
+def inspection_ok(stats: dict) -> bool:
+    """False when `inspect_shards` found a bad record, a repeated scenario id or a manifest problem."""
+    return stats["validation"]["num_bad_records"] == 0 and not stats["manifest"]["problems"]
+
+
+def scenario_ids(files: list[Path]) -> Iterator[str]:
+    """The scenario id of every record in `files` ("" where none), skimmed without decoding or CRC checks:
+    a lookup, fast even for large shards. A file stops at its first damaged frame."""
+    from scenariomax.view.index import skim_scenario_id  # imported here: the viewer's index imports this module
+
+    for file in files:
+        try:
+            with open(file, "rb") as stream:
+                fd, offset = stream.fileno(), 0
+                size = os.fstat(fd).st_size
+                while offset + 16 <= size:
+                    (length,) = struct.unpack("<Q", os.pread(fd, 8, offset))
+                    if offset + 16 + length > size:
+                        break
+                    yield skim_scenario_id(fd, offset + 12, length)
+                    offset += 16 + length
+        except OSError:
+            continue
+
+
+def require_scenario(path: str | os.PathLike, files: list[Path], scenario_id: str) -> None:
+    """InputError (one line, with a few ids that do exist) unless a record under `path` holds `scenario_id`."""
+    examples: list[str] = []
+    for found in scenario_ids(files):
+        if found == scenario_id:
+            return
+        if found and found not in examples and len(examples) < 3:
+            examples.append(found)
+    hint = f"ids look like: {', '.join(examples)}" if examples else "no record there holds a readable id"
+    raise InputError(f"no scenario {scenario_id!r} in {path}; {hint}")
+
+
 def load_scenario(path: str | os.PathLike, scenario_id: str | None = None) -> Scenario:
     """The scenario with `scenario_id` (the first decodable one when None) from the records under
-    `path`; InputError when it is not there. Streams, stopping at the match."""
-    for item in scan_records(resolve_files(path)):
+    `path`; InputError when it is not there. Streams, stopping at the match. Like inspect, it reads
+    outputs whose manifest reports problems (inspect reports them)."""
+    for item in scan_records(find_files_to_check(path)):
         check = item.check
         if check is None or check.scenario is None:
             continue
@@ -331,6 +394,18 @@ def _scenario_lines(block: dict) -> list[str]:
     return [f"Scenario {block['scenario_id']}"] + _rows(rows)
 
 
+def _manifest_verdict(stats: dict) -> str:
+    manifest = stats["manifest"]
+    if manifest["problems"]:
+        return f"{len(manifest['problems'])} problem(s)"
+    if manifest["num_checked"]:
+        counts = "" if "max_records" in stats else ", record counts match"
+        return f"OK (complete: every listed shard present, none unlisted{counts})"
+    if manifest["warnings"]:
+        return "none: completeness cannot be checked"
+    return "none"
+
+
 def format_report(stats: dict) -> str:
     """An aligned, plain-text report of `inspect_shards` statistics."""
     objects, sdc, rg = stats["objects"], stats["sdc"], stats["roadgraph"]
@@ -349,8 +424,15 @@ def format_report(stats: dict) -> str:
                      for i, entry in enumerate(stats["sizes"])]
     bad = validation["num_bad_records"]
     summary_rows.append(("schema validation", "OK" if bad == 0 else f"{bad} bad record(s)"))
-    lines += _rows(summary_rows)
+    summary_rows.append(("manifest", _manifest_verdict(stats)))
+    rendered = _rows(summary_rows)
+    lines += rendered[:-1]
     lines += _rows([("", problem) for problem in validation["first_problems"]], indent=4)
+    lines.append(rendered[-1])
+    manifest = stats["manifest"]
+    lines += _rows([("", line) for line in manifest["problems"][:MAX_LISTED_PROBLEMS]], indent=4)
+    if len(manifest["problems"]) > MAX_LISTED_PROBLEMS:
+        lines += _rows([("", f"... and {len(manifest['problems']) - MAX_LISTED_PROBLEMS} more")], indent=4)
 
     lines.append("Objects (observed at least once)")
     lines += _rows(_count_rows(objects["by_type"], "total") + [
@@ -389,4 +471,5 @@ def format_report(stats: dict) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["format_report", "inspect_shards", "load_scenario", "summarize_scenario"]
+__all__ = ["format_report", "inspect_shards", "inspection_ok", "load_scenario", "require_scenario", "scenario_ids",
+           "summarize_scenario"]

@@ -2,20 +2,26 @@
 
 Workers turn a unit (a raw file, or a chunk of synthetic seeds) into encoded records written to a
 private file under `OUT/.work/`; the main process appends them, in unit order, to shards of
-`shard_size` records. A shard is sealed (fsync + rename) when full and the manifest is rewritten
-atomically after every seal, recording how many records of each unit are sealed. Because sources
-are deterministic, `--resume` re-runs unfinished units and skips their sealed records: nothing is
-lost or duplicated after a crash or `kill -9`. At the end shards get their final names
-`<split>-XXXXX-of-YYYYY.tfrecord`.
+`shard_size` records. The manifest is written before any other file and rewritten atomically after
+every seal and every few seconds (a checkpoint of the open shard: its byte length is fsynced and
+recorded), so it always lists every file the run created and how many records of each unit are safe
+on disk. Because sources are deterministic, `--resume` truncates the open shard to its checkpoint,
+re-runs unfinished units and skips their saved records: a kill loses at most the units in flight
+and the last few seconds, and the resumed output equals an uninterrupted one byte for byte. At the
+end shards get their final names `<split>-XXXXX-of-YYYYY.tfrecord`.
+
+Ownership: a run writes only into a new or empty folder, or one whose manifest it continues
+(`--resume`, same inputs and settings) or replaces (`--overwrite`, which deletes only the files
+that manifest lists). Worker processes watch the main process and exit when it is gone.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import hashlib
-import json
 import multiprocessing
 import os
+import re
 import shutil
 import time
 from collections import deque
@@ -24,16 +30,29 @@ from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
+from scenariomax._lifeline import exit_with_parent, watch_process
 from scenariomax.codec import encode_scenario
 from scenariomax.enrich.budget import fit_to_budget
-from scenariomax.io.tfrecord import TFRecordWriter, iter_records
+from scenariomax.errors import InputError, describe_os_error
+from scenariomax.io.tfrecord import TFRecordWriter, frame_record, iter_records
+from scenariomax.manifest import (
+    MANIFEST,
+    MANIFEST_TEMP,
+    ManifestError,
+    file_sha256,
+    read_manifest,
+    write_manifest,
+)
+from scenariomax.progress import Progress
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes, load_schema
 from scenariomax.shards import shard_name
-from scenariomax.sources.base import MANIFEST_NOTES, Failure, InputError, Source
+from scenariomax.sources.base import MANIFEST_NOTES, Failure, Source
+from scenariomax.sources.sanity import SANITIZED_SOURCES, sanitize_scenario
 
-MANIFEST = "manifest.json"
 WORK_DIR = ".work"
+CHECKPOINT_EVERY_S = 2.0  # at most this much appended work is lost to a kill (plus the units in flight)
+SPLIT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 
 Transform = Callable[[Scenario], Scenario]
 
@@ -49,6 +68,7 @@ class ConvertSettings:
     shard_size: int = 1000
     workers: int | None = None  # None: one per core
     resume: bool = False
+    overwrite: bool = False  # replace a finished or interrupted conversion (only the files its manifest lists)
     sizes: Sizes = dataclasses.field(default_factory=Sizes)
     engine: str = "process"  # "process" | "ray"
     ray_address: str | None = None
@@ -81,7 +101,7 @@ class ConversionResult:
 
     @property
     def ok(self) -> bool:
-        return self.num_failures == 0
+        return self.num_failures == 0 and self.num_scenarios > 0
 
     def summary_rows(self) -> list[tuple[str, str]]:
         rate = self.num_scenarios / self.elapsed_s if self.elapsed_s > 0 else 0.0
@@ -122,6 +142,8 @@ def _iter_unit_records(source: Source, unit: str, sizes: Sizes, transform: Trans
                 failures.append(item)
                 continue
             try:
+                if source.name in SANITIZED_SOURCES:  # physical sanity of every real source, noted per scenario
+                    item = sanitize_scenario(item)
                 record = prepare_scenario(item, sizes, transform)
             except Exception as error:  # per-scenario isolation: record and continue
                 failures.append(Failure(unit, item.scenario_id or f"#{position}", _one_line(error)))
@@ -133,7 +155,7 @@ def _iter_unit_records(source: Source, unit: str, sizes: Sizes, transform: Trans
     except InputError as error:
         failures.append(Failure(unit, "*", _one_line(error)))
     except Exception as error:  # a reader bug must not kill the run either
-        failures.append(Failure(unit, "*", f"{unit}: {_one_line(error)}"))
+        failures.append(Failure(unit, "*", _one_line(error)))  # the failure's unit names the file
 
 
 def convert_unit_to_file(source: Source, unit: str, work_dir: str, sizes: Sizes,
@@ -141,15 +163,20 @@ def convert_unit_to_file(source: Source, unit: str, work_dir: str, sizes: Sizes,
     """Worker: converts one unit into a private record file (memory stays bounded)."""
     failures: list[Failure] = []
     notes: list[dict] = []
-    digest = hashlib.sha1(unit.encode()).hexdigest()[:16]
-    temp = Path(work_dir) / f"unit-{digest}.tmp"
-    final = Path(work_dir) / f"unit-{digest}.rec"
+    temp, final = (Path(work_dir) / name for name in unit_work_files(unit))
     with TFRecordWriter(temp) as writer:
         for record in _iter_unit_records(source, unit, sizes, transform, failures, notes):
             writer.write(record)
         count = writer.num_records
     os.replace(temp, final)
     return UnitResult(unit, str(final), None, count, tuple(failures), _peak_rss_mib(), tuple(notes))
+
+
+def unit_work_files(unit: str) -> tuple[str, str]:
+    """The names of a unit's private files under `.work/` (in progress, finished): derived from the unit id,
+    so the manifest's unit list names every work file a run can leave behind."""
+    digest = hashlib.sha1(unit.encode()).hexdigest()[:16]
+    return f"unit-{digest}.tmp", f"unit-{digest}.rec"
 
 
 def convert_unit_in_memory(source: Source, unit: str, sizes: Sizes, transform: Transform | None) -> UnitResult:
@@ -174,23 +201,6 @@ def _convert_unit_star(args) -> UnitResult:
 # Manifest and shard bookkeeping (main process only).
 
 
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as stream:
-        for block in iter(lambda: stream.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
-def _write_json_atomic(path: Path, data: dict) -> None:
-    temp = path.with_name(f".{path.name}.tmp")
-    with open(temp, "w") as stream:
-        json.dump(data, stream, indent=1, sort_keys=False)
-        stream.flush()
-        os.fsync(stream.fileno())
-    os.replace(temp, path)
-
-
 def _run_settings(source: Source, settings: ConvertSettings) -> dict:
     return {
         "source": source.settings(),
@@ -201,45 +211,95 @@ def _run_settings(source: Source, settings: ConvertSettings) -> dict:
     }
 
 
-class _ShardSink:
-    """Appends records to sealed shards and keeps the manifest in step with what is on disk."""
+class _OpenShard:
+    """The shard being filled: framed records appended to a hidden file; `checkpoint` makes them durable."""
 
-    def __init__(self, out: Path, source: Source, settings: ConvertSettings, units: Sequence[str]):
+    def __init__(self, path: Path, num_records: int = 0, keep_bytes: int | None = None):
+        self.path = path
+        if keep_bytes is None:
+            self._stream = open(path, "wb")
+        else:  # resume: drop whatever was appended after the last checkpoint
+            self._stream = open(path, "r+b")
+            self._stream.truncate(keep_bytes)
+            self._stream.seek(keep_bytes)
+        self.num_records = num_records
+
+    def write(self, data: bytes) -> None:
+        self._stream.write(frame_record(data))
+        self.num_records += 1
+
+    def checkpoint(self) -> int:
+        """Flushes to disk; returns the durable length in bytes."""
+        self._stream.flush()
+        os.fsync(self._stream.fileno())
+        return self._stream.tell()
+
+    def close(self) -> None:
+        self.checkpoint()
+        self._stream.close()
+
+
+class _ShardSink:
+    """Appends records to shards and keeps the manifest in step with what is on disk.
+
+    Per unit the manifest records `saved_records` (records durable in sealed shards or in the open shard
+    up to its checkpoint) and `done` (every record of the unit saved). `open_shard` names the file being
+    filled, its record count and its byte length at the last checkpoint.
+    """
+
+    def __init__(self, out: Path, source: Source, settings: ConvertSettings, units: Sequence[str],
+                 previous: dict | None):
         self.out = out
         self.settings = settings
         self.path = out / MANIFEST
-        run_settings = _run_settings(source, settings)
-        if settings.resume and self.path.exists():
-            self.manifest = json.loads(self.path.read_text())
-            if self.manifest.get("settings") != run_settings:
-                raise ConversionError(f"{self.path}: settings differ from the interrupted run; "
-                                      "rerun with the same options or use a new --out")
+        if previous is not None:  # --resume, checked against the run settings and inputs by the caller
+            self.manifest = previous
+            for state in previous["units"].values():  # manifests of earlier versions said sealed_records
+                state.setdefault("saved_records", state.pop("sealed_records", 0))
+            previous.setdefault("open_shard", None)
         else:
             self.manifest = {
                 "schema": {"name": load_schema().name, "version": load_schema().version},
                 "source_dataset": source.name,
-                "settings": run_settings,
+                "settings": _run_settings(source, settings),
                 "state": "running",
                 "counts": {},
                 "shards": [],
-                "units": {unit: {"sealed_records": 0, "done": False, "num_records": 0} for unit in units},
+                "open_shard": None,
+                "units": {unit: {"saved_records": 0, "done": False, "num_records": 0} for unit in units},
                 "failures": [],
                 "notes": [],  # per-scenario decisions and repairs the source reports (see MANIFEST_NOTES)
             }
-        self.open_writer: TFRecordWriter | None = None
-        self.open_path: Path | None = None
-        self.open_units: dict[str, int] = {}  # unit -> records in the open shard
-        self.finished_units: set[str] = set()  # all records handed over (maybe not yet sealed)
+        self.open: _OpenShard | None = None
+        self.unsaved: dict[str, int] = {}  # unit -> records appended since the last seal or checkpoint
+        self.finished_units: set[str] = set()  # all records handed over (maybe not yet saved)
         self.pending_failures: dict[str, list[dict]] = {}
         self.pending_notes: dict[str, list[dict]] = {}
+        self.last_checkpoint = time.monotonic()
+        self._reopen_interrupted_shard()
+        self._save()  # before any other file: the manifest always lists what this run may create
+
+    def _reopen_interrupted_shard(self) -> None:
+        state = self.manifest.get("open_shard")
+        if not state:
+            return
+        path = self.out / state["file"]
+        sealed = self.out / _sealed_name(state["file"])
+        if not path.exists() and sealed.exists():  # killed between the seal's rename and its manifest update
+            os.replace(sealed, path)
+        if path.exists() and path.stat().st_size >= state["bytes"]:
+            self.open = _OpenShard(path, state["num_records"], keep_bytes=state["bytes"])
+            return
+        raise ConversionError(f"{path}: the interrupted shard is missing or shorter than its checkpoint; "
+                              "convert again with --overwrite")
 
     # Units -----------------------------------------------------------------------------------------
     def unit_state(self, unit: str) -> dict:
-        return self.manifest["units"].setdefault(unit, {"sealed_records": 0, "done": False, "num_records": 0})
+        return self.manifest["units"].setdefault(unit, {"saved_records": 0, "done": False, "num_records": 0})
 
     def add_unit_result(self, result: UnitResult) -> int:
-        """Appends a unit's records, skipping those already sealed by an earlier run."""
-        skip = self.unit_state(result.unit)["sealed_records"]
+        """Appends a unit's records, skipping those already saved by an earlier run."""
+        skip = self.unit_state(result.unit)["saved_records"]
         written = 0
         for index, record in enumerate(self._records(result)):
             if index < skip:
@@ -254,9 +314,11 @@ class _ShardSink:
         self.pending_failures[result.unit] = [dataclasses.asdict(f) for f in result.failures]
         self.pending_notes[result.unit] = list(result.notes)
         self.finished_units.add(result.unit)
-        if result.unit not in self.open_units:
+        if result.unit not in self.unsaved:
             self._mark_done(result.unit)
             self._save()
+        if time.monotonic() - self.last_checkpoint >= CHECKPOINT_EVERY_S:
+            self.checkpoint()
         return written
 
     @staticmethod
@@ -266,6 +328,9 @@ class _ShardSink:
         elif result.records_path:
             yield from iter_records(result.records_path)
 
+    def num_saved_records(self) -> int:
+        return sum(state["saved_records"] for state in self.manifest["units"].values()) + sum(self.unsaved.values())
+
     def _mark_done(self, unit: str) -> None:
         state = self.unit_state(unit)
         state["done"] = True
@@ -274,31 +339,46 @@ class _ShardSink:
         notes = [n for n in self.manifest.get("notes", []) if n["unit"] != unit] + self.pending_notes.pop(unit, [])
         self.manifest["notes"] = notes
 
-    # Shards ----------------------------------------------------------------------------------------
-    def _append(self, unit: str, record: bytes) -> None:
-        if self.open_writer is None:
-            index = len(self.manifest["shards"])
-            self.open_path = self.out / f".sealing-{self.settings.split}-{index:05d}.tfrecord"
-            self.open_writer = TFRecordWriter(self.open_path)
-        self.open_writer.write(record)
-        self.open_units[unit] = self.open_units.get(unit, 0) + 1
-        if self.open_writer.num_records >= self.settings.shard_size:
-            self.seal()
-
-    def seal(self) -> None:
-        if self.open_writer is None:
-            return
-        self.open_writer.close()
-        index = len(self.manifest["shards"])
-        sealed = self.out / f".sealed-{self.settings.split}-{index:05d}.tfrecord"
-        os.replace(self.open_path, sealed)
-        self.manifest["shards"].append({"file": sealed.name, "num_records": self.open_writer.num_records,
-                                        "sha256": _sha256(sealed)})
-        for unit, count in self.open_units.items():
-            self.unit_state(unit)["sealed_records"] += count
+    def _commit_unsaved(self) -> None:
+        """The records appended since the last save point are durable now: count them, close finished units."""
+        for unit, count in self.unsaved.items():
+            self.unit_state(unit)["saved_records"] += count
             if unit in self.finished_units:
                 self._mark_done(unit)
-        self.open_writer, self.open_path, self.open_units = None, None, {}
+        self.unsaved = {}
+        self.last_checkpoint = time.monotonic()
+
+    # Shards ----------------------------------------------------------------------------------------
+    def _append(self, unit: str, record: bytes) -> None:
+        if self.open is None:
+            index = len(self.manifest["shards"])
+            name = f".sealing-{self.settings.split}-{index:05d}.tfrecord"
+            self.manifest["open_shard"] = {"file": name, "num_records": 0, "bytes": 0}
+            self._save()  # listed before it exists: an interrupted run never leaves an unlisted file
+            self.open = _OpenShard(self.out / name)
+        self.open.write(record)
+        self.unsaved[unit] = self.unsaved.get(unit, 0) + 1
+        if self.open.num_records >= self.settings.shard_size:
+            self.seal()
+
+    def checkpoint(self) -> None:
+        """Makes the open shard's records durable and records its length (bounded loss on a kill)."""
+        if self.open is not None:
+            self.manifest["open_shard"].update(num_records=self.open.num_records, bytes=self.open.checkpoint())
+        self._commit_unsaved()
+        self._save()
+
+    def seal(self) -> None:
+        if self.open is None:
+            return
+        self.open.close()
+        sealed = self.out / _sealed_name(self.open.path.name)
+        os.replace(self.open.path, sealed)
+        self.manifest["shards"].append({"file": sealed.name, "num_records": self.open.num_records,
+                                        "num_bytes": sealed.stat().st_size, "sha256": file_sha256(sealed)})
+        self.manifest["open_shard"] = None
+        self.open = None
+        self._commit_unsaved()
         self._save()
 
     def _save(self) -> None:
@@ -309,7 +389,7 @@ class _ShardSink:
             "scenarios": sum(s["num_records"] for s in self.manifest["shards"]),
             "failures": len(self.manifest["failures"]),
         }
-        _write_json_atomic(self.path, self.manifest)
+        write_manifest(self.out, self.manifest)
 
     def finalize(self) -> list[str]:
         """Seals the last shard and gives every shard its final `-of-` name (crash-safe)."""
@@ -332,22 +412,122 @@ class _ShardSink:
         return [shard["file"] for shard in shards]
 
 
+def _sealed_name(open_name: str) -> str:
+    return open_name.replace(".sealing-", ".sealed-", 1)
+
+
 # --------------------------------------------------------------------------------------------------
+# Ownership of the output folder.
 
 
-def _prepare_out(out: Path, resume: bool) -> None:
-    manifest = out / MANIFEST
-    if out.exists() and not resume and manifest.exists():
-        raise ConversionError(f"{out}: already holds a conversion (manifest.json); "
-                              "use --resume to continue it or choose a new --out")
-    out.mkdir(parents=True, exist_ok=True)
-    if not resume or not manifest.exists():
-        for stale in list(out.glob(".sealing-*")) + list(out.glob(".sealed-*")):
-            stale.unlink()
+def owned_files(manifest: dict) -> set[str]:
+    """Names (relative to the output folder) of every file a run with this manifest may have created."""
+    names = {MANIFEST, MANIFEST_TEMP, WORK_DIR}
+    for shard in manifest.get("shards", []):
+        names.update(shard[key] for key in ("file", "temp_file") if isinstance(shard, dict) and key in shard)
+    open_shard = manifest.get("open_shard")
+    if open_shard:
+        names.update({open_shard["file"], _sealed_name(open_shard["file"])})
+    for unit in manifest.get("units", {}):
+        names.update(f"{WORK_DIR}/{name}" for name in unit_work_files(unit))
+    return names
+
+
+def _foreign_entries(out: Path, owned: set[str]) -> list[str]:
+    """Entries of `out` (and of its work folder) that no manifest lists: the user's, never ours to touch."""
+    foreign = [entry.name for entry in sorted(out.iterdir()) if entry.name not in owned]
     work = out / WORK_DIR
-    if work.exists():
-        shutil.rmtree(work)  # leftovers of a killed run are recomputed
-    work.mkdir()
+    if work.is_dir():
+        foreign += [f"{WORK_DIR}/{entry.name}" for entry in sorted(work.iterdir())
+                    if f"{WORK_DIR}/{entry.name}" not in owned]
+    return foreign
+
+
+def _claim_output(out: Path, settings: ConvertSettings) -> dict | None:
+    """Checks that this run may write into `out` and clears what an earlier run of ours left there.
+
+    Returns the previous manifest to continue (with --resume), else None. Refuses, without touching
+    anything, a folder holding files that no manifest of ours lists.
+    """
+    if out.exists() and not out.is_dir():
+        raise ConversionError(f"{out}: exists and is not a folder; choose another --out")
+    if not out.exists():
+        return None
+    manifest_path = out / MANIFEST
+    if not manifest_path.exists():
+        foreign = _foreign_entries(out, set())
+        if foreign:
+            raise ConversionError(f"{out}: not empty and holds no {MANIFEST} (e.g. {', '.join(foreign[:3])}): "
+                                  "these are not files of a conversion; choose an empty or new --out")
+        return None
+    try:
+        previous = read_manifest(out)
+    except ManifestError as error:
+        raise ConversionError(str(error)) from None
+    owned = owned_files(previous)
+    foreign = _foreign_entries(out, owned)
+    if settings.resume:
+        return previous
+    if not settings.overwrite:
+        raise ConversionError(f"{out}: already holds a conversion ({MANIFEST}); add --resume to continue it, "
+                              "--overwrite to replace it, or choose a new --out")
+    if foreign:
+        raise ConversionError(f"{out}: --overwrite replaces only the files its {MANIFEST} lists, and the folder "
+                              f"also holds {', '.join(foreign[:3])}; move them away or choose a new --out")
+    for name in sorted(owned - {MANIFEST, WORK_DIR}, reverse=True):
+        (out / name).unlink(missing_ok=True)
+    if (out / WORK_DIR).is_dir():
+        (out / WORK_DIR).rmdir()  # empty now: everything in it was listed
+    manifest_path.unlink()  # last: until here a crash leaves a folder that --overwrite still owns
+    return None
+
+
+def _refuse_inputs_inside(out: Path, units: Sequence[str]) -> None:
+    """Reading and writing one folder would duplicate records, and --overwrite would delete the inputs."""
+    root = out.resolve()
+    for unit in units:
+        path = Path(unit)
+        if path.exists() and (path.resolve() == root or root in path.resolve().parents):
+            raise ConversionError(f"{out}: holds the inputs of this conversion ({path.name}); choose another --out")
+
+
+def _check_resumable(previous: dict, source: Source, settings: ConvertSettings, units: Sequence[str],
+                     out: Path) -> None:
+    path = out / MANIFEST
+    if previous.get("settings") != _run_settings(source, settings):
+        raise ConversionError(f"{path}: settings differ from that conversion's; rerun with the same options, "
+                              "or use --overwrite or a new --out")
+    done_before = previous.get("units") or {}
+    new = [unit for unit in units if unit not in done_before]
+    missing = [unit for unit in done_before if unit not in set(units)]
+    if new or missing:
+        example = (new or missing)[0]
+        raise ConversionError(f"{path}: the inputs differ from that conversion's ({len(new)} new, {len(missing)} "
+                              f"missing, e.g. {example}); convert them into a new --out")
+
+
+def _clear_work_dir(out: Path, manifest: dict) -> Path:
+    """Recreates `.work/` empty of our files (a killed run's leftovers are recomputed)."""
+    work = out / WORK_DIR
+    for name in owned_files(manifest):
+        if name.startswith(f"{WORK_DIR}/"):
+            (out / name).unlink(missing_ok=True)
+    work.mkdir(exist_ok=True)
+    return work
+
+
+# --------------------------------------------------------------------------------------------------
+# Worker processes.
+
+
+def _watch_main_process(main_pid: int) -> None:
+    """Worker initializer: exit as soon as the main process is gone (kill -9 included, on every platform).
+
+    The executor's own shutdown needs a live main process; without this a killed conversion leaves its
+    workers blocked on a pipe forever.
+    """
+    exit_with_parent()  # the parent is the fork server, which itself dies with the main process
+    watch_process(main_pid)
 
 
 def _results_process(source: Source, units: Sequence[str], settings: ConvertSettings, work: Path,
@@ -361,8 +541,10 @@ def _results_process(source: Source, units: Sequence[str], settings: ConvertSett
     # (deterministic shards) with a bounded number of units in flight (bounded memory and disk).
     # Unlike multiprocessing.Pool, the executor fails loudly if a worker dies (e.g. OOM-killed).
     context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(["scenariomax._forkserver_preload"])  # the fork server too dies with this process
     window = 2 * workers
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_watch_main_process,
+                             initargs=(os.getpid(),)) as pool:
         pending: deque = deque()
         next_task = 0
         while next_task < len(tasks) or pending:
@@ -399,9 +581,14 @@ def _results_ray(source: Source, units: Sequence[str], settings: ConvertSettings
 
 
 def convert(source: Source, settings: ConvertSettings) -> ConversionResult:
-    """Runs a conversion (see module docstring). Returns counts; never raises for bad inputs."""
+    """Runs a conversion (see module docstring). Returns counts; never raises for bad inputs.
+
+    Raises ConversionError (one line) when it cannot start or continue, including OS errors such as a
+    read-only or full disk; what was saved until then stays resumable.
+    """
     start = time.perf_counter()
     out = Path(settings.out)
+    _check_settings(settings)
     try:
         units = list(source.list_units())
     except InputError as error:
@@ -409,31 +596,52 @@ def convert(source: Source, settings: ConvertSettings) -> ConversionResult:
     if not units:
         where = getattr(source, "src", None)
         raise ConversionError(f"{where + ': ' if where else ''}no {source.name} inputs found, nothing to convert")
-    _prepare_out(out, settings.resume)
-    sink = _ShardSink(out, source, settings, units)
-    if sink.manifest["state"] == "complete":
-        todo: list[str] = []
-    else:
-        todo = [unit for unit in units if not sink.unit_state(unit)["done"]]
+    try:
+        return _convert_into(out, source, settings, units, start)
+    except OSError as error:
+        raise ConversionError(describe_os_error(error, resumable=True)) from None
+
+
+def _check_settings(settings: ConvertSettings) -> None:
+    if not SPLIT_NAME.fullmatch(settings.split):
+        raise ConversionError(f"--split {settings.split!r}: use letters, digits, '_', '-' or '.' (it names files)")
+    if settings.shard_size < 1:
+        raise ConversionError(f"--shard-size {settings.shard_size}: must be at least 1")
+    if settings.workers is not None and settings.workers < 1:
+        raise ConversionError(f"--workers {settings.workers}: must be at least 1 (leave it out for one per core)")
+    if settings.resume and settings.overwrite:
+        raise ConversionError("--resume and --overwrite exclude each other: continue the conversion, or replace it")
+
+
+def _convert_into(out: Path, source: Source, settings: ConvertSettings, units: list[str],
+                  start: float) -> ConversionResult:
+    _refuse_inputs_inside(out, units)
+    previous = _claim_output(out, settings)
+    if previous is not None:
+        _check_resumable(previous, source, settings, units, out)
+    out.mkdir(parents=True, exist_ok=True)
+    sink = _ShardSink(out, source, settings, units, previous)
+    work = _clear_work_dir(out, sink.manifest)
+    todo = [] if sink.manifest["state"] == "complete" else [u for u in units if not sink.unit_state(u)["done"]]
     skipped = len(units) - len(todo)
     workers = settings.workers or os.cpu_count() or 1
     if settings.engine == "ray":
         results = _results_ray(source, todo, settings, workers)
     elif settings.engine == "process":
-        results = _results_process(source, todo, settings, out / WORK_DIR, workers)
+        results = _results_process(source, todo, settings, work, workers)
     else:
         raise ConversionError(f"unknown engine {settings.engine!r} (use 'process' or 'ray')")
-    progress = _progress_bar(settings.progress, getattr(source, "expected_num_scenarios", lambda: None)())
-    try:
+    progress = _progress(settings.progress, source, sink, len(units), skipped)
+    by_scenario = progress.unit == "scenarios"
+    with progress:
         for result in results:
             written = sink.add_unit_result(result)
-            progress.update(written)
-            progress.set_postfix(
-                failures=len(sink.manifest["failures"]) + sum(map(len, sink.pending_failures.values())))
-    finally:
-        progress.close()
+            progress.update(written if by_scenario else 1)
+            counts = {} if by_scenario else {"scenarios": sink.num_saved_records()}
+            progress.set_postfix(**counts, failures=len(sink.manifest["failures"]) + sum(
+                map(len, sink.pending_failures.values())))
     shards = sink.finalize()
-    shutil.rmtree(out / WORK_DIR, ignore_errors=True)
+    shutil.rmtree(work, ignore_errors=True)
     manifest = sink.manifest
     return ConversionResult(
         out=out, num_units=len(units), num_units_skipped=skipped,
@@ -442,14 +650,11 @@ def convert(source: Source, settings: ConvertSettings) -> ConversionResult:
     )
 
 
-def _progress_bar(enabled: bool, total: int | None):
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="scenario", disable=not enabled, dynamic_ncols=True, desc="converting")
-
-
-def read_manifest(out: str | os.PathLike) -> dict:
-    path = Path(out) / MANIFEST
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no manifest (not a conversion output)")
-    return json.loads(path.read_text())
+def _progress(enabled: bool, source: Source, sink: _ShardSink, num_units: int, num_units_done: int) -> Progress:
+    """Scenarios of the known total (synthetic), else inputs of all inputs: either way with an ETA. A resumed
+    run starts at what was saved before."""
+    expected = getattr(source, "expected_num_scenarios", lambda: None)()
+    if expected is not None:
+        return Progress("converting", total=expected, unit="scenarios", enabled=enabled,
+                        initial=sink.num_saved_records())
+    return Progress("converting", total=num_units, unit="inputs", enabled=enabled, initial=num_units_done)

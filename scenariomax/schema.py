@@ -67,12 +67,17 @@ class ShardSchema:
 
 
 def _schema_text() -> str:
-    # Source checkouts and editable installs read `schemas/` at the repo root; wheels carry a copy
-    # in the `scenariomax._schemas` package (mapped onto `schemas/` in pyproject.toml).
+    # A wheel carries the schema in scenariomax/_schemas/ (setup.py maps the package `scenariomax._schemas` onto
+    # `schemas/`); a checkout or an editable install reads `schemas/` at the repo root. The packaged copy goes
+    # first so that an installed scenariomax never picks up an unrelated `schemas/` folder beside it.
+    packaged = resources.files("scenariomax") / "_schemas" / SCHEMA_FILE
+    if packaged.is_file():
+        return packaged.read_text()
     in_repo = Path(__file__).resolve().parent.parent / "schemas" / SCHEMA_FILE
     if in_repo.is_file():
         return in_repo.read_text()
-    return resources.files("scenariomax._schemas").joinpath(SCHEMA_FILE).read_text()
+    raise FileNotFoundError(f"{SCHEMA_FILE}: the shard schema is neither in scenariomax/_schemas (an installed "
+                            f"wheel) nor in {in_repo.parent} (a checkout); reinstall vmax")
 
 
 @functools.lru_cache(maxsize=1)

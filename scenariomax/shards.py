@@ -1,7 +1,10 @@
 """Reading and writing shard files: `read_shards` streams Scenarios, `write_shards` writes them.
 
-Shard files are named `<split>-<index>-of-<count>.tfrecord`; see `scenariomax.pipeline` for the
-parallel, resumable conversion that produces them together with `manifest.json`.
+Shard files are named `<split>-<index>-of-<count>.tfrecord`, beside a `manifest.json` that lists each one
+with its record count and sha256 (see `scenariomax.manifest`). Readers check the manifest before streaming
+(state complete, every listed shard present, no unlisted shard file) and compare record counts as they
+go; a folder without a manifest is read with a warning. `scenariomax.pipeline` runs parallel, resumable
+conversions; `write_shards` is the small sequential writer.
 """
 
 from __future__ import annotations
@@ -12,47 +15,96 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from scenariomax.codec import SchemaError, decode_scenario, encode_scenario
+from scenariomax.errors import InputError
 from scenariomax.io.example import ExampleError
 from scenariomax.io.tfrecord import RecordError, TFRecordWriter, iter_records
+from scenariomax.manifest import (
+    COMPLETE,
+    MANIFEST,
+    MANIFEST_TEMP,
+    SHARD_SUFFIXES,
+    WRITE_SHARDS,
+    ManifestError,
+    check_before_reading,
+    file_sha256,
+    is_record_name,
+    read_manifest,
+    record_count_message,
+    scopes_of,
+    write_manifest,
+)
 from scenariomax.scenario import Scenario
-from scenariomax.schema import Sizes
-
-SHARD_SUFFIXES = (".tfrecord", ".tfrecords")
+from scenariomax.schema import Sizes, load_schema
 
 
 class ShardReadError(ValueError):
     """A record could not be read or decoded: the message names the file and record."""
 
 
+class ShardWriteError(InputError):
+    """`write_shards` refuses its output folder (it holds files write_shards did not write). One line."""
+
+
 def shard_name(split: str, index: int, count: int) -> str:
     return f"{split}-{index:05d}-of-{count:05d}.tfrecord"
 
 
-def list_shard_files(path: str | os.PathLike) -> list[Path]:
-    """Resolves a directory, a file or a glob pattern to a sorted list of record files."""
+def _is_glob(text: str) -> bool:
+    return any(ch in text for ch in "*?[")
+
+
+def named_folder(path: str | os.PathLike) -> Path | None:
+    """The folder `path` names, or None when it is a file or a glob."""
     text = str(path)
-    if any(ch in text for ch in "*?["):
+    return Path(text) if not _is_glob(text) and Path(text).is_dir() else None
+
+
+def find_record_files(path: str | os.PathLike) -> list[Path]:
+    """A directory, a file or a glob pattern resolved to a sorted list of record files, without any
+    manifest check; empty for an empty folder. FileNotFoundError when `path` does not exist."""
+    text = str(path)
+    if _is_glob(text):
         files = [Path(p) for p in glob.glob(text)]
     elif Path(text).is_dir():
-        files = [p for p in Path(text).iterdir() if p.name.endswith(SHARD_SUFFIXES) or ".tfrecord-" in p.name]
+        files = [p for p in Path(text).iterdir() if is_record_name(p.name)]
     elif Path(text).is_file():
         files = [Path(text)]
     else:
         raise FileNotFoundError(f"{text}: no such file, directory or matching glob")
-    files = sorted(p for p in files if p.is_file() and not p.name.startswith("."))
+    return sorted(p for p in files if p.is_file() and not p.name.startswith("."))
+
+
+def _checked_files(path: str | os.PathLike) -> tuple[list[Path], dict[Path, int]]:
+    """The record files under `path` after the manifest's cheap checks, and the record count it lists for each."""
+    files = find_record_files(path)
+    expected = check_before_reading(scopes_of(files, named_folder(path)))
     if not files:
-        raise FileNotFoundError(f"{text}: no .tfrecord files found")
-    return files
+        raise FileNotFoundError(f"{path}: no .tfrecord files found")
+    return files, expected
+
+
+def list_shard_files(path: str | os.PathLike) -> list[Path]:
+    """Resolves a directory, a file or a glob pattern to a sorted list of record files.
+
+    Where a folder holds a manifest.json, raises ManifestError (an InputError, one line) when the output is
+    incomplete or disagrees with it; warns (ManifestWarning) when a named folder has none."""
+    return _checked_files(path)[0]
 
 
 def iter_raw_records(path: str | os.PathLike) -> Iterator[tuple[Path, int, bytes]]:
-    """Yields (file, record index, bytes) for every record under `path`."""
-    for file in list_shard_files(path):
+    """Yields (file, record index, bytes) for every record under `path`; ShardReadError when a shard holds
+    another number of records than its manifest lists."""
+    files, expected = _checked_files(path)
+    for file in files:
+        count = 0
         try:
-            for index, data in enumerate(iter_records(file)):
-                yield file, index, data
+            for data in iter_records(file):
+                yield file, count, data
+                count += 1
         except RecordError as error:
             raise ShardReadError(str(error)) from None
+        if file in expected and count != expected[file]:
+            raise ShardReadError(record_count_message(file, count, expected[file]))
 
 
 def read_shards(path: str | os.PathLike, sizes: Sizes | None = None) -> Iterator[Scenario]:
@@ -68,30 +120,128 @@ def decode_record(data: bytes, file: Path | str, index: int, sizes: Sizes | None
         raise ShardReadError(f"{file}: record {index}: {error}") from None
 
 
-def write_shards(scenarios: Iterable[Scenario], out: str | os.PathLike, sizes: Sizes | None = None,
-                 shard_size: int = 1000, split: str = "train") -> list[Path]:
-    """Writes scenarios to `out/<split>-XXXXX-of-YYYYY.tfrecord` (sequential, no manifest).
+# --- writing ---------------------------------------------------------------------------------------
 
-    Use `scenariomax.pipeline.convert` for parallel, resumable conversions with a manifest.
+def _is_own_temp(name: str) -> bool:
+    """Hidden files write_shards makes and removes: shards being written, the manifest being replaced."""
+    return name == MANIFEST_TEMP or (name.startswith(".") and name.endswith(".tfrecord.tmp"))
+
+
+def _claim_folder(out: Path, overwrite: bool) -> dict | None:
+    """Checks that write_shards may write into `out`; returns the manifest of its own earlier output there
+    (to replace), else None. Refuses, touching nothing, a folder holding anything it did not write."""
+    if out.exists() and not out.is_dir():
+        raise ShardWriteError(f"{out}: exists and is not a folder; choose another output folder")
+    if not out.exists():
+        return None
+    entries = sorted(entry.name for entry in out.iterdir() if not _is_own_temp(entry.name))
+    if MANIFEST not in entries:
+        if entries:
+            raise ShardWriteError(f"{out}: not empty and holds no {MANIFEST} (e.g. {', '.join(entries[:3])}); "
+                                  "write_shards writes only into a new or empty folder, or over its own output")
+        return None
+    try:
+        previous = read_manifest(out)
+    except ManifestError as error:
+        raise ShardWriteError(str(error)) from None
+    if previous["source_dataset"] != WRITE_SHARDS:
+        raise ShardWriteError(f"{out}: holds the output of `scenariomax convert` ({MANIFEST}); write_shards writes "
+                              "only into a new or empty folder, or over its own output")
+    owned = {MANIFEST} | _listed_names(previous)
+    foreign = [name for name in entries if name not in owned]
+    if foreign:
+        raise ShardWriteError(f"{out}: holds files its {MANIFEST} does not list (e.g. {', '.join(foreign[:3])}); "
+                              "move them away or choose a new folder")
+    if previous["state"] == COMPLETE and not overwrite:
+        raise ShardWriteError(f"{out}: already holds shards written by write_shards; pass overwrite=True to replace "
+                              "them, or choose a new folder")
+    return previous
+
+
+def _listed_names(manifest: dict) -> set[str]:
+    return {entry[key] for entry in manifest["shards"] for key in ("file", "temp_file") if key in entry}
+
+
+def _finish_temp_shard(path: Path) -> dict:
+    """fsync + sha256 of a closed shard (one read, from the page cache)."""
+    sha256 = file_sha256(path)
+    with open(path, "rb") as stream:
+        os.fsync(stream.fileno())
+    return {"num_bytes": path.stat().st_size, "sha256": sha256}
+
+
+def _write_temp_shards(scenarios: Iterable[Scenario], out: Path, sizes: Sizes | None, shard_size: int,
+                       split: str) -> list[dict]:
+    """Writes hidden temp shards; returns their manifest entries (without final names). Removes them on error."""
+    entries: list[dict] = []
+    writer: TFRecordWriter | None = None
+    try:
+        for scenario in scenarios:
+            if writer is None or writer.num_records >= shard_size:
+                if writer is not None:
+                    writer.close()
+                    entries[-1].update(num_records=writer.num_records, **_finish_temp_shard(writer.path))
+                entries.append({"temp_file": f".{split}-{len(entries):05d}.tfrecord.tmp"})
+                writer = TFRecordWriter(out / entries[-1]["temp_file"])
+            writer.write(encode_scenario(scenario, sizes))
+        if writer is not None:
+            writer.close()
+            entries[-1].update(num_records=writer.num_records, **_finish_temp_shard(writer.path))
+    except BaseException:
+        if writer is not None:
+            writer.close()
+        for entry in entries:
+            (out / entry["temp_file"]).unlink(missing_ok=True)
+        raise
+    return entries
+
+
+def _new_manifest(sizes: Sizes | None, shard_size: int, split: str, shards: list[dict]) -> dict:
+    schema = load_schema()
+    num_records = sum(entry["num_records"] for entry in shards)
+    return {
+        "schema": {"name": schema.name, "version": schema.version},
+        "source_dataset": WRITE_SHARDS,
+        "settings": {"split": split, "shard_size": shard_size, "sizes": sizes.as_dict() if sizes else None},
+        "state": "finalizing",
+        "counts": {"scenarios": num_records, "failures": 0},
+        "shards": shards,
+        "failures": [],
+        "notes": [],
+    }
+
+
+def write_shards(scenarios: Iterable[Scenario], out: str | os.PathLike, sizes: Sizes | None = None,
+                 shard_size: int = 1000, split: str = "train", overwrite: bool = False) -> list[Path]:
+    """Writes scenarios to `out/<split>-XXXXX-of-YYYYY.tfrecord` plus `out/manifest.json` (sequential).
+
+    `out` must be new or empty, or hold an earlier output of write_shards: an interrupted one is replaced,
+    a complete one only with `overwrite=True`. Anything else there (another conversion, shards without a
+    manifest, other files) raises ShardWriteError, touching nothing. Shards are written to hidden temp files
+    and renamed once the manifest lists them, so a crash never leaves an output that reads as complete.
+    Use `scenariomax.pipeline.convert` for parallel, resumable conversions.
     """
     out = Path(out)
+    previous = _claim_folder(out, overwrite)
     out.mkdir(parents=True, exist_ok=True)
-    temp_files: list[Path] = []
-    writer: TFRecordWriter | None = None
-    for scenario in scenarios:
-        if writer is None or writer.num_records >= shard_size:
-            if writer is not None:
-                writer.close()
-            temp_files.append(out / f".{split}-{len(temp_files):05d}.tfrecord.tmp")
-            writer = TFRecordWriter(temp_files[-1])
-        writer.write(encode_scenario(scenario, sizes))
-    if writer is not None:
-        writer.close()
-    final = [out / shard_name(split, i, len(temp_files)) for i in range(len(temp_files))]
-    for temp, path in zip(temp_files, final):
-        os.replace(temp, path)
-    return final
+    for entry in out.iterdir():
+        if _is_own_temp(entry.name):
+            entry.unlink()  # leftovers of an interrupted write_shards
+    temps = _write_temp_shards(scenarios, out, sizes, shard_size, split)
+    if previous is not None:  # the earlier output goes; until the new one is complete the folder reads as interrupted
+        write_manifest(out, {**previous, "state": "running"})
+        for name in sorted(_listed_names(previous)):
+            (out / name).unlink(missing_ok=True)
+    shards = [{"file": shard_name(split, index, len(temps)), **entry} for index, entry in enumerate(temps)]
+    manifest = _new_manifest(sizes, shard_size, split, shards)
+    write_manifest(out, manifest)
+    for entry in shards:
+        os.replace(out / entry.pop("temp_file"), out / entry["file"])
+    manifest["state"] = COMPLETE
+    write_manifest(out, manifest)
+    return [out / entry["file"] for entry in shards]
 
 
-__all__ = ["read_shards", "write_shards", "list_shard_files", "iter_raw_records", "ShardReadError",
-           "RecordError", "shard_name", "decode_record"]
+__all__ = ["read_shards", "write_shards", "list_shard_files", "find_record_files", "iter_raw_records",
+           "ShardReadError", "ShardWriteError", "RecordError", "shard_name", "decode_record", "named_folder",
+           "SHARD_SUFFIXES"]

@@ -2,27 +2,44 @@
 
 A record is checked in two layers. First the raw tf.Example against the schema (keys present,
 dtype kinds, element counts consistent with one set of budget sizes), then, when the structure is
-sound, the decoded `Scenario` against its own invariants (`Scenario.validate`). Every problem is one
-line of text, so a user can grep a report or read it in a terminal.
+sound, the decoded `Scenario` against its own invariants (`Scenario.validate`). With `deep=True`,
+`plausibility_problems` adds physical bounds per field (`PLAUSIBLE_BOUNDS`, docs/validate.md).
+
+`validate_shards` also checks the output as a whole: scenario ids unique across every file, and, where a
+folder holds a `manifest.json`, that the folder is the complete output it lists (state, shards present,
+no unlisted shard, record counts and sha256; see `scenariomax.manifest`). Every problem is one line of
+text, so a user can grep a report or read it in a terminal.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
 from scenariomax.codec import SchemaError, features_to_scenario, infer_sizes
+from scenariomax.errors import InputError
 from scenariomax.io.example import ExampleError, decode_example
-from scenariomax.io.tfrecord import RecordError, iter_records
-from scenariomax.scenario import Scenario
+from scenariomax.io.record_kind import WOMD_SCENARIO_NOT_A_SHARD, looks_like_womd_scenario
+from scenariomax.io.tfrecord import RecordError, iter_records_from_stream
+from scenariomax.manifest import (
+    COMPLETE,
+    HashingReader,
+    ShardDigest,
+    content_problems,
+    listing_problems,
+    load_for_checking,
+    manifest_path,
+    no_manifest_message,
+    scopes_of,
+)
+from scenariomax.scenario import MAX_ABS_YAW, Scenario
 from scenariomax.schema import FeatureSpec, Sizes, load_schema
-from scenariomax.shards import list_shard_files
-from scenariomax.sources.base import InputError
+from scenariomax.shards import find_record_files, list_shard_files, named_folder
 
 # Groups of keys that a record may leave out entirely (a raw WOMD tf.Example has neither),
 # but never in part: half a group means a broken writer.
@@ -56,6 +73,8 @@ class ValidationReport:
     num_records: int  # records read (framing intact), good or bad
     num_files: int
     bad: tuple[BadRecord, ...]  # (file, record_index, scenario_id, reason) per bad record or damaged file
+    # (record_index -1: a problem of the whole file or of the output, e.g. from its manifest)
+    warnings: tuple[str, ...] = ()  # e.g. a folder without manifest.json, whose completeness is unchecked
 
     @property
     def ok(self) -> bool:
@@ -188,13 +207,142 @@ def check_record(data: bytes) -> RecordCheck:
     try:
         features = decode_example(data)
     except ExampleError as error:
-        return RecordCheck("", (str(error),), None, None)
-    return check_features(features)
+        features, decode_problem = {}, str(error)
+    else:
+        decode_problem = ""
+    if not features and looks_like_womd_scenario(data):  # a raw WOMD file given as shards: name the format
+        return RecordCheck("", (WOMD_SCENARIO_NOT_A_SHARD,), None, None)
+    return RecordCheck("", (decode_problem,), None, None) if decode_problem else check_features(features)
 
 
 def validate_record(data: bytes) -> list[str]:
     """Checks one raw record (tf.Example bytes) against the shard schema; one line per problem."""
     return list(check_record(data).problems)
+
+
+# --- plausibility (validate --deep) ----------------------------------------------------------------
+# Ranges no real driving log leaves, wide enough for every dataset we convert (docs/validate.md says why).
+MAX_ABS_XY_M = 1e6  # positions are local to a city map (or to `world_origin`)
+MAX_ABS_Z_M = 1e4  # above Everest, below the Dead Sea
+BOX_SIZE_M = (0.05, 30.0)  # a post to a truck with trailer
+MAX_SPEED_MPS = 100.0  # 360 km/h
+MAX_SPEED_LIMIT_MPS = 70.0  # 252 km/h
+MAX_TIMESTAMP_MICROS = 3_600_000_000  # one hour from the first step
+STEP_MICROS = (10_000, 1_000_000)  # time per step between valid steps (10 Hz nominal: 100_000)
+MAX_IMPLIED_SPEED_MPS = 150.0  # displacement between valid steps over their nominal time apart (0.1 s per step)
+MAX_ARC_LENGTH_M = 1e5
+NOMINAL_STEP_S = 0.1
+
+_OBJECT_STEP = ("object", "step")
+
+
+@dataclasses.dataclass(frozen=True)
+class Bound:
+    """A range every real entry of one quantity must lie in; NaN and infinity lie in none."""
+
+    name: str
+    low: float
+    high: float
+    unit: str
+    values_fn: Callable[[Scenario], np.ndarray]
+    mask_fn: Callable[[Scenario], np.ndarray]  # the real entries (same shape as the values)
+    axes: tuple[str, ...]  # what each axis indexes, for the location in the message
+
+
+def _xyz_bounds(name: str, xyz_fn: Callable[[Scenario], np.ndarray], mask_fn: Callable[[Scenario], np.ndarray],
+                axes: tuple[str, ...]) -> tuple[Bound, ...]:
+    limits = (MAX_ABS_XY_M, MAX_ABS_XY_M, MAX_ABS_Z_M)
+    return tuple(Bound(f"{name} {axis}", -limit, limit, "m", lambda s, i=i: xyz_fn(s)[..., i], mask_fn, axes)
+                 for i, (axis, limit) in enumerate(zip("xyz", limits)))
+
+
+def _object_bound(field: str, low: float, high: float, unit: str) -> Bound:
+    return Bound(field, low, high, unit, lambda s: getattr(s, field), lambda s: s.valid, _OBJECT_STEP)
+
+
+PLAUSIBLE_BOUNDS: tuple[Bound, ...] = (
+    *_xyz_bounds("position", lambda s: np.stack([s.x, s.y, s.z], axis=-1), lambda s: s.valid, _OBJECT_STEP),
+    *(_object_bound(field, *BOX_SIZE_M, "m") for field in ("length", "width", "height")),
+    _object_bound("speed", 0.0, MAX_SPEED_MPS, "m/s"),
+    _object_bound("velocity_x", -MAX_SPEED_MPS, MAX_SPEED_MPS, "m/s"),
+    _object_bound("velocity_y", -MAX_SPEED_MPS, MAX_SPEED_MPS, "m/s"),
+    _object_bound("bbox_yaw", -MAX_ABS_YAW, MAX_ABS_YAW, "rad"),
+    _object_bound("vel_yaw", -MAX_ABS_YAW, MAX_ABS_YAW, "rad"),
+    _object_bound("timestamp_micros", 0, MAX_TIMESTAMP_MICROS, "us"),
+    *_xyz_bounds("roadgraph", lambda s: s.roadgraph_xyz, lambda s: s.roadgraph_valid, ("point",)),
+    Bound("roadgraph speed_limit", 0.0, MAX_SPEED_LIMIT_MPS, "m/s", lambda s: s.roadgraph_speed_limit,
+          lambda s: s.roadgraph_valid & (s.roadgraph_speed_limit != -1), ("point",)),  # -1: unknown
+    *_xyz_bounds("traffic light stop point", lambda s: np.stack([s.tl_x, s.tl_y, s.tl_z], axis=-1),
+                 lambda s: s.tl_valid, ("light", "step")),
+    *_xyz_bounds("SDC path", lambda s: s.path_xyz, lambda s: s.path_valid, ("path", "point")),
+    Bound("SDC path arc_length", 0.0, MAX_ARC_LENGTH_M, "m", lambda s: s.path_arc_length, lambda s: s.path_valid,
+          ("path", "point")),
+    *_xyz_bounds("agent path", lambda s: s.agent_path_xyz, lambda s: s.agent_path_valid, ("agent path", "point")),
+    Bound("agent path arc_length", 0.0, MAX_ARC_LENGTH_M, "m", lambda s: s.agent_path_arc_length,
+          lambda s: s.agent_path_valid, ("agent path", "point")),
+)
+
+
+def _location(axes: tuple[str, ...], index: tuple[int, ...]) -> str:
+    return ", ".join(f"{axis} {int(i)}" for axis, i in zip(axes, index))
+
+
+def _entries(count: int) -> str:
+    return f" ({count} entries)" if count > 1 else ""
+
+
+def _bound_problem(scenario: Scenario, bound: Bound) -> str | None:
+    values = np.asarray(bound.values_fn(scenario), dtype=np.float64)
+    mask = np.asarray(bound.mask_fn(scenario), dtype=bool)
+    if values.shape != mask.shape:
+        return None  # a shape problem, which Scenario.validate reports
+    with np.errstate(invalid="ignore"):
+        outside = mask & ~((values >= bound.low) & (values <= bound.high))
+    if not outside.any():
+        return None
+    first = tuple(np.argwhere(outside)[0])
+    return (f"{bound.name} {values[first]:.4g} {bound.unit} at {_location(bound.axes, first)} is outside the "
+            f"plausible range [{bound.low:g}, {bound.high:g}] {bound.unit}{_entries(int(outside.sum()))}")
+
+
+def _consecutive_valid_steps(valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(object, earlier step, later step) of every pair of consecutive valid steps. (N, T) -> 3 x (K,)"""
+    objects, steps = np.nonzero(valid)  # row-major: sorted by object, then step
+    same_object = objects[1:] == objects[:-1]
+    return objects[1:][same_object], steps[:-1][same_object], steps[1:][same_object]
+
+
+def _motion_problems(s: Scenario) -> list[str]:
+    """Time per step and implied speed between consecutive valid steps of each object."""
+    if s.valid.shape != s.x.shape or s.timestamp_micros.shape != s.x.shape:
+        return []
+    objects, earlier, later = _consecutive_valid_steps(s.valid)
+    if objects.size == 0:
+        return []
+    problems = []
+    gap = (later - earlier).astype(np.float64)
+    per_step = (s.timestamp_micros[objects, later] - s.timestamp_micros[objects, earlier]) / gap
+    off = (per_step < STEP_MICROS[0]) | (per_step > STEP_MICROS[1])
+    if off.any():
+        k = int(np.argmax(off))
+        problems.append(f"timestamps advance {per_step[k]:.4g} us per step at object {objects[k]}, step {later[k]}, "
+                        f"outside the plausible [{STEP_MICROS[0]}, {STEP_MICROS[1]}] us{_entries(int(off.sum()))}")
+    with np.errstate(invalid="ignore", over="ignore"):
+        distance = np.hypot(s.x[objects, later].astype(np.float64) - s.x[objects, earlier],
+                            s.y[objects, later].astype(np.float64) - s.y[objects, earlier])
+        implied = distance / (gap * NOMINAL_STEP_S)
+        jump = implied > MAX_IMPLIED_SPEED_MPS  # NaN positions are the bounds' business
+    if jump.any():
+        k = int(np.argmax(jump))
+        problems.append(f"object {objects[k]} jumps {distance[k]:.4g} m between steps {earlier[k]} and {later[k]} "
+                        f"({implied[k]:.4g} m/s, plausible up to {MAX_IMPLIED_SPEED_MPS:g}){_entries(int(jump.sum()))}")
+    return problems
+
+
+def plausibility_problems(scenario: Scenario) -> list[str]:
+    """Values no real log holds (`PLAUSIBLE_BOUNDS`, time steps, jumps); one line per quantity."""
+    problems = [problem for bound in PLAUSIBLE_BOUNDS if (problem := _bound_problem(scenario, bound))]
+    return problems + _motion_problems(scenario)
 
 
 # --- files -----------------------------------------------------------------------------------------
@@ -207,11 +355,25 @@ def join_reasons(problems: tuple[str, ...] | list[str]) -> str:
 
 
 def resolve_files(path: str | os.PathLike) -> list[Path]:
-    """The record files under `path` (directory, file or glob); InputError when there are none."""
+    """The record files under `path` (directory, file or glob) for reading: InputError when there are none,
+    ManifestError (an InputError) when a manifest says the output is incomplete or inconsistent."""
     try:
         return list_shard_files(path)
     except FileNotFoundError as error:
         raise InputError(str(error)) from None
+
+
+def find_files_to_check(path: str | os.PathLike) -> list[Path]:
+    """The record files under `path`, without the readers' manifest checks (validate and inspect report those
+    instead of stopping at them). InputError when `path` holds neither records nor a manifest."""
+    try:
+        files = find_record_files(path)
+    except FileNotFoundError as error:
+        raise InputError(str(error)) from None
+    folder = named_folder(path)
+    if not files and (folder is None or not manifest_path(folder).exists()):
+        raise InputError(f"{path}: no .tfrecord files found")
+    return files
 
 
 @dataclasses.dataclass(frozen=True)
@@ -224,60 +386,141 @@ class ScannedRecord:
     framing_error: str = ""
 
 
-def scan_records(files: list[Path], max_records: int | None = None) -> Iterator[ScannedRecord]:
+def scan_records(files: list[Path], max_records: int | None = None, digests: dict[Path, ShardDigest] | None = None,
+                 hash_bytes: bool = False) -> Iterator[ScannedRecord]:
     """Validates records file by file, streaming. A damaged file yields one framing-error entry and
-    the scan goes on with the next file."""
+    the scan goes on with the next file.
+
+    `digests`: filled with the record count (and with `hash_bytes` the sha256) of every file read to its end
+    or to its damage, for comparison with a manifest in the same pass over the bytes."""
     num_seen = 0
     for file in files:
         index = 0
         try:
-            for data in iter_records(file):
-                if max_records is not None and num_seen >= max_records:
-                    return
-                yield ScannedRecord(file, index, check_record(data))
-                index += 1
-                num_seen += 1
+            with open(file, "rb") as raw:
+                stream = HashingReader(raw) if hash_bytes else raw
+                for data in iter_records_from_stream(stream, str(file)):
+                    if max_records is not None and num_seen >= max_records:
+                        return
+                    yield ScannedRecord(file, index, check_record(data))
+                    index += 1
+                    num_seen += 1
+            if digests is not None:
+                digests[file] = ShardDigest(index, stream.digest.hexdigest() if hash_bytes else "")
         except RecordError as error:
             yield ScannedRecord(file, index, None, str(error))
+            if digests is not None:
+                digests[file] = ShardDigest(index, error=str(error))
         except OSError as error:
             yield ScannedRecord(file, index, None, f"{file}: cannot read ({error.strerror or error})")
+            if digests is not None:
+                digests[file] = ShardDigest(index, error=str(error))
 
 
-def validate_shards(path: str | os.PathLike) -> ValidationReport:
-    """Validates every record under `path` (a directory, a file or a glob), streaming."""
-    files = resolve_files(path)
+@dataclasses.dataclass(frozen=True)
+class ManifestFindings:
+    """What the manifests of the folders under a path say about them."""
+
+    problems: tuple[BadRecord, ...]  # record_index -1: about a file or the folder, not one record
+    warnings: tuple[str, ...]  # folders without a manifest (completeness unchecked)
+    num_checked: int  # folders whose manifest was read
+
+
+def manifest_findings(path: str | os.PathLike, files: list[Path],
+                      digests: dict[Path, ShardDigest] | None = None) -> ManifestFindings:
+    """Checks each folder under `path` against its manifest.json: the listing always, record counts and
+    sha256 for the files in `digests` (files read to their end)."""
+    problems, warnings, num_checked = [], [], 0
+    for scope in scopes_of(files, named_folder(path)):
+        manifest, unreadable = load_for_checking(scope.folder)
+        if manifest is None:
+            if scope.whole and not unreadable:
+                warnings.append(no_manifest_message(scope.folder))
+            found = unreadable
+        else:
+            num_checked += 1
+            found = listing_problems(scope.folder, manifest, None if scope.whole else scope.files)
+            if manifest["state"] == COMPLETE and digests:
+                by_name = {file.name: digests[file] for file in scope.files if file in digests}
+                found += content_problems(scope.folder, manifest, by_name)
+        problems += [BadRecord(problem.path, -1, "", problem.message) for problem in found]
+    return ManifestFindings(tuple(problems), tuple(warnings), num_checked)
+
+
+def duplicate_problem(first_seen: dict[str, tuple[str, int]], item: ScannedRecord) -> str | None:
+    """Remembers where each scenario id was first met; a line naming that place for a repeat."""
+    scenario_id = item.check.scenario_id if item.check is not None else ""
+    if not scenario_id:
+        return None
+    first = first_seen.setdefault(scenario_id, (str(item.file), item.record_index))
+    if first == (str(item.file), item.record_index):
+        return None
+    return f"duplicate scenario id, first seen in {first[0]}: record {first[1]}"
+
+
+def validate_shards(path: str | os.PathLike, deep: bool = False) -> ValidationReport:
+    """Validates every record under `path` (a directory, a file or a glob), streaming, and the output as a
+    whole: unique scenario ids, and the folder against its manifest.json (sha256 included). `deep` adds
+    `plausibility_problems` per record."""
+    files = find_files_to_check(path)
+    digests: dict[Path, ShardDigest] = {}
+    first_seen: dict[str, tuple[str, int]] = {}
     num_records, bad = 0, []
-    for item in scan_records(files):
+    for item in scan_records(files, digests=digests, hash_bytes=True):
         if item.check is None:
             bad.append(BadRecord(str(item.file), item.record_index, "", item.framing_error))
             continue
         num_records += 1
-        if item.check.problems:
-            bad.append(BadRecord(str(item.file), item.record_index, item.check.scenario_id,
-                                 join_reasons(item.check.problems)))
-    return ValidationReport(num_records=num_records, num_files=len(files), bad=tuple(bad))
+        problems = list(item.check.problems)
+        if deep and item.check.scenario is not None:
+            problems += plausibility_problems(item.check.scenario)
+        duplicate = duplicate_problem(first_seen, item)
+        if duplicate:
+            problems.append(duplicate)
+        if problems:
+            bad.append(BadRecord(str(item.file), item.record_index, item.check.scenario_id, join_reasons(problems)))
+    findings = manifest_findings(path, files, digests)
+    return ValidationReport(num_records=num_records, num_files=len(files), bad=findings.problems + tuple(bad),
+                            warnings=findings.warnings)
+
+
+def format_bad(entry: BadRecord) -> str:
+    """One line naming the file once: where (record and scenario id when known) and what."""
+    prefix = f"{entry.file}: "
+    reason = entry.reason[len(prefix):] if entry.reason.startswith(prefix) else entry.reason
+    # a framing problem names the file and says where in it (a byte offset); a record's own problem needs its index
+    has_index = reason == entry.reason and entry.record_index >= 0
+    where = f"{entry.file}: record {entry.record_index}" if has_index else entry.file
+    who = f" ({entry.scenario_id})" if entry.scenario_id else ""
+    return f"{where}{who}: {reason}"
 
 
 def format_validation(report: ValidationReport, max_lines: int = 50) -> str:
-    """A short human-readable summary: one line per bad record, then a verdict."""
-    lines = []
-    for entry in report.bad[:max_lines]:
-        who = f" ({entry.scenario_id})" if entry.scenario_id else ""
-        lines.append(f"{entry.file}: record {entry.record_index}{who}: {entry.reason}")
+    """A short human-readable summary: one line per bad record, warnings, then a verdict."""
+    lines = [format_bad(entry) for entry in report.bad[:max_lines]]
     if len(report.bad) > max_lines:
         lines.append(f"... and {len(report.bad) - max_lines} more")
+    lines += [f"warning: {warning}" for warning in report.warnings]
     verdict = "OK" if report.ok else f"{report.num_bad} problem(s)"
     lines.append(f"{report.num_records} records in {report.num_files} file(s): {verdict}")
     return "\n".join(lines)
 
 
 __all__ = [
+    "PLAUSIBLE_BOUNDS",
     "BadRecord",
+    "Bound",
+    "ManifestFindings",
     "RecordCheck",
     "ValidationReport",
     "check_features",
     "check_record",
+    "duplicate_problem",
+    "find_files_to_check",
+    "format_bad",
     "format_validation",
+    "manifest_findings",
+    "plausibility_problems",
     "resolve_files",
     "scan_records",
     "validate_record",

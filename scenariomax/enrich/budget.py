@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from scenariomax.crop import distance_to_points, sdc_positions
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
 
@@ -27,25 +28,6 @@ _PER_LANE = ("lane_id", "lane_valid", "lane_successors", "lane_predecessors", "l
              "lane_right_neighbors")
 
 
-def sdc_positions(scenario: Scenario) -> np.ndarray:
-    """Valid (x, y) positions of the SDC over the episode. -> (k, 2)"""
-    sdc = scenario.sdc_index
-    mask = scenario.valid[sdc]
-    return np.stack([scenario.x[sdc, mask], scenario.y[sdc, mask]], axis=1).astype(np.float64)
-
-
-def distance_to_polyline_points(points: np.ndarray, anchors: np.ndarray, chunk: int = 4096) -> np.ndarray:
-    """Minimum distance from each point (m, 2) to a set of anchor points (k, 2). -> (m,)"""
-    if len(anchors) == 0:
-        return np.zeros(len(points))
-    # Thin the anchors: consecutive SDC positions are ~1 m apart, 0.5 m resolution is plenty.
-    out = np.empty(len(points))
-    for start in range(0, len(points), chunk):
-        block = points[start:start + chunk, None, :] - anchors[None, :, :]
-        out[start:start + chunk] = np.sqrt((block ** 2).sum(-1).min(axis=1))
-    return out
-
-
 def object_relevance_order(scenario: Scenario) -> np.ndarray:
     """Object indices, SDC first, then by closest approach to the SDC (never-present objects last)."""
     sdc = scenario.sdc_index
@@ -58,7 +40,7 @@ def object_relevance_order(scenario: Scenario) -> np.ndarray:
         mask = scenario.valid[index]
         if mask.any():
             pts = np.stack([scenario.x[index, mask], scenario.y[index, mask]], axis=1)
-            closest[index] = 1e6 + distance_to_polyline_points(pts, anchors).min()
+            closest[index] = 1e6 + distance_to_points(pts, anchors).min()
         else:
             closest[index] = 1e12
     closest[sdc] = -1.0
@@ -108,21 +90,21 @@ def fit_to_budget(scenario: Scenario, sizes: Sizes) -> Scenario:
     anchors = sdc_positions(scenario)[::5]
     num_points = scenario.roadgraph_xyz.shape[0]
     if num_points > sizes.num_roadgraph:
-        dist = distance_to_polyline_points(scenario.roadgraph_xyz[:, :2].astype(np.float64), anchors)
+        dist = distance_to_points(scenario.roadgraph_xyz[:, :2].astype(np.float64), anchors)
         dist = np.where(scenario.roadgraph_valid, dist, np.inf)
         keep = np.sort(np.argpartition(dist, sizes.num_roadgraph - 1)[: sizes.num_roadgraph])
         changes.update(_take(scenario, _PER_POINT, keep))
     num_lights = scenario.tl_state.shape[0]
     if num_lights > sizes.num_lights:
         mean = _mean_light_positions(scenario)
-        keep = np.sort(np.argsort(distance_to_polyline_points(mean, anchors), kind="stable")[: sizes.num_lights])
+        keep = np.sort(np.argsort(distance_to_points(mean, anchors), kind="stable")[: sizes.num_lights])
         changes.update(_take(scenario, _PER_LIGHT, keep))
     num_lanes = scenario.lane_id.shape[0]
     if num_lanes > sizes.num_lanes:
         rg_ids = changes.get("roadgraph_id", scenario.roadgraph_id)
         rg_xy = changes.get("roadgraph_xyz", scenario.roadgraph_xyz)[:, :2].astype(np.float64)
         lane_dist = np.full(num_lanes, np.inf)
-        point_dist = distance_to_polyline_points(rg_xy, anchors)
+        point_dist = distance_to_points(rg_xy, anchors)
         for row, lane in enumerate(scenario.lane_id):
             mask = rg_ids == lane
             if mask.any():

@@ -86,18 +86,29 @@ def controllable_mask(scenario: Scenario, lanes: Lanes,
     return mask
 
 
+def nearest_first(scenario: Scenario, agents: np.ndarray) -> np.ndarray:
+    """Indices of the `agents` (mask (N,)) valid at the current step, the SDC left out, by distance to the SDC
+    there (ties: object order)."""
+    start, sdc = scenario.current_time_index, scenario.sdc_index
+    candidates = np.flatnonzero(agents & scenario.valid[:, start])
+    candidates = candidates[candidates != sdc]
+    distance = np.hypot(scenario.x[candidates, start] - scenario.x[sdc, start],
+                        scenario.y[candidates, start] - scenario.y[sdc, start])
+    return candidates[np.argsort(distance, kind="stable")]
+
+
 def agent_paths(scenario: Scenario, lanes: Lanes, graph: LaneGraph, controllable: np.ndarray,
                 num_agent_paths: int, settings: PathSettings) -> dict:
-    """The best lane path of each controllable agent but the SDC (object order, up to the budget)."""
+    """The best path of each controllable agent but the SDC, nearest the SDC first (up to the budget: in dense
+    scenes the agents that interact with the SDC get the slots): the lane path that follows its log from the
+    current step on, spliced with the logged positions where no lane path does (`search_paths`, `follow_log`)."""
     agent_settings = dataclasses.replace(settings, num_paths=1, max_candidates=8, max_expansions=80,
                                          unlogged_lane_changes=False)
     start = scenario.current_time_index
     chosen: list[tuple[int, Path]] = []
-    for index in np.flatnonzero(controllable):
-        if index == scenario.sdc_index or len(chosen) >= num_agent_paths:
-            continue
-        if not scenario.valid[index, start]:
-            continue
+    for index in nearest_first(scenario, controllable):
+        if len(chosen) >= num_agent_paths:
+            break
         track, track_yaw = logged_track(scenario.x[index], scenario.y[index], scenario.bbox_yaw[index],
                                         scenario.valid[index], start)
         position = np.array([scenario.x[index, start], scenario.y[index, start], scenario.z[index, start]])

@@ -14,10 +14,24 @@ such evidence, a lane change starts `default_change_delay_m` ahead and blends ov
 `default_change_length_m` (smoothstep).
 
 Ranking and on-route: the logged positions from the current step onward (the part a policy
-drives; the past lies behind the path start) are compared to each path. Paths are ranked by mean
-distance; a path is on route when at least `on_route_fraction` (95%) of those positions lie
-within `on_route_tolerance_m` (1.0 m) of it. Paths are resampled every `spacing_m` (1 m) and
-padded to `points_per_path` (valid False).
+drives; the past lies behind the path start) are compared to each path. The path that follows the
+log ranks first (below), the others by mean distance; a path is on route when at least
+`on_route_fraction` (95%) of those positions lie within `on_route_tolerance_m` (1.0 m) of it. Paths
+are resampled every `spacing_m` (1 m) and padded to `points_per_path` (valid False).
+
+Following the log (`follow_log`): a lane path covers the log when every logged position lies within
+the tolerance of it, in order (each foot on the path at or past the previous one, not further on than
+the log has driven: a path that loops back past the log does not count). The covering path with the
+smallest mean distance follows the log. When none covers it (the log changes lanes without a
+neighbour link, drives between lanes, or leaves the lane graph), the candidate that covers the log
+longest is spliced: it is kept up to the last position it covers (its last `splice_blend_m` pulled
+smoothly onto the log; dropped when shorter), then the path runs through the logged positions until
+the log rejoins a lane (within `log_rejoin_radius_m`, heading aligned, and within the tolerance for
+the next `log_rejoin_length_m`), where a new search continues along the lane graph (its start pulled
+onto the log likewise; at most `max_log_splices` times). A log that never rejoins is followed to its
+end, then the path blends into the nearest heading-aligned lane there, or runs straight on along the
+last heading. The spliced path is added to the candidates. Points on the log carry the id of the
+nearest heading-aligned lane within `max_change_offset_m` (-1 when none, as on a straight run-on).
 """
 
 from __future__ import annotations
@@ -60,6 +74,13 @@ class PathSettings:
     rejoin_heading_deg: float = 30.0
     on_route_tolerance_m: float = 1.0
     on_route_fraction: float = 0.95
+    follow_log: bool = True  # splice the logged positions in where no lane path covers the log
+    splice_blend_m: float = 10.0  # lane path ends and starts pulled onto the log over this length
+    log_rejoin_radius_m: float = 0.5
+    log_rejoin_length_m: float = 5.0
+    max_log_splices: int = 8
+    splice_search_candidates: int = 8  # search caps after a splice: the log guides the search
+    splice_search_expansions: int = 80
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -263,7 +284,8 @@ def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], 
     return results
 
 
-def _resample(pieces: tuple[_Piece, ...], lanes: Lanes, settings: PathSettings) -> tuple[np.ndarray, ...]:
+def _resample(pieces: tuple[_Piece, ...], settings: PathSettings) -> _Piece:
+    """The pieces joined and resampled every `spacing_m`, cut to the point budget (lane index -1: none)."""
     xyz = np.vstack([p.xyz for p in pieces])
     lane = np.concatenate([p.lane for p in pieces])
     cum = arc_lengths(xyz)
@@ -273,36 +295,269 @@ def _resample(pieces: tuple[_Piece, ...], lanes: Lanes, settings: PathSettings) 
     targets = np.arange(0.0, total + 1e-6, settings.spacing_m)[: settings.points_per_path]
     points = point_at_arc(xyz, cum, targets) if len(xyz) > 1 else xyz[:1]
     segment = np.clip(np.searchsorted(cum, targets, side="right") - 1, 0, len(lane) - 1)
-    return points, lanes.ids[lane[segment]], targets[: len(points)]
+    return _Piece(points, lane[segment][: len(points)])
+
+
+def _candidates(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], track: np.ndarray,
+                track_yaw: np.ndarray, settings: PathSettings) -> list[_Piece]:
+    """Distinct resampled lane paths from the start lanes, in search order."""
+    out: list[_Piece] = []
+    seen: set = set()
+    for pieces in _enumerate(lanes, graph, starts, track, track_yaw, settings):
+        path = _resample(pieces, settings)
+        lane = path.lane
+        key = (tuple(lane[np.r_[True, lane[1:] != lane[:-1]]]), len(path.xyz), tuple(np.round(path.xyz[-1, :2], 1)))
+        if key not in seen:
+            seen.add(key)
+            out.append(path)
+    return out
+
+
+def _aligned_lane_distance(lanes: Lanes, xy: np.ndarray, yaw: np.ndarray, radius: float,
+                           heading_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """Distance from each position to the nearest lane segment running within `heading_deg` of its
+    heading, and that lane's index (inf / -1 beyond `radius`). (m, 2), (m,) -> (m,), (m,)"""
+    dist_out, lane_out = np.full(len(xy), np.inf), np.full(len(xy), -1, np.int64)
+    if len(xy) == 0 or len(lanes.points) == 0:
+        return dist_out, lane_out
+    k = min(16, len(lanes.points))
+    # Lane points lie <= ~1 m apart: a segment within `radius` has an end point within radius + 1 m.
+    dist, idx = lanes.tree.query(xy, k=k, distance_upper_bound=radius + 1.0)
+    dist, idx = dist.reshape(len(xy), k), idx.reshape(len(xy), k)
+    hit = np.isfinite(dist)
+    idx = np.where(hit, idx, 0)  # (m, k)
+    heading = np.stack([np.cos(yaw), np.sin(yaw)], 1)
+    ok = hit & ((lanes.point_tangent[idx] * heading[:, None, :]).sum(-1) > np.cos(np.radians(heading_deg)))
+    best = np.full(dist.shape, np.inf)
+    last = len(lanes.points) - 1
+    for other in (np.maximum(idx - 1, 0), np.minimum(idx + 1, last)):  # the segments on either side
+        same = lanes.point_lane[other] == lanes.point_lane[idx]
+        a, b = lanes.points[idx, :2], np.where(same[..., None], lanes.points[other, :2], lanes.points[idx, :2])
+        seg = b - a
+        frac = np.clip(((xy[:, None, :] - a) * seg).sum(-1) / np.maximum((seg ** 2).sum(-1), 1e-12), 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(xy[:, None, :] - (a + frac[..., None] * seg), axis=-1))
+    best = np.where(ok, best, np.inf)
+    column = best.argmin(axis=1)
+    rows = np.arange(len(xy))
+    nearest = best[rows, column]
+    found = nearest <= radius
+    dist_out[found] = nearest[found]
+    lane_out[found] = lanes.point_lane[idx[rows, column]][found]
+    return dist_out, lane_out
+
+
+def _covered_prefix(track: np.ndarray, travel: np.ndarray, path: np.ndarray, dist: np.ndarray, arc: np.ndarray,
+                    tolerance: float) -> tuple[int, np.ndarray]:
+    """How many leading logged positions a path covers in order, and the arc of each one's foot: each
+    within `tolerance`, its foot neither behind the previous foot nor further ahead than the log has
+    travelled. `dist`, `arc` (m,) are the nearest feet on the whole path; where that foot is out of
+    order (the path passes the same place twice) the foot is looked for near the previous one.
+    track (m, 2), travel (m,), path (q, 3) -> (count, (count,) arcs)"""
+    cum = arc_lengths(path)
+    feet = np.zeros(len(track))
+    prev_arc, prev_travel = 0.0, 0.0
+    for j in range(len(track)):
+        low, high = prev_arc - 2.0, prev_arc + 1.5 * (travel[j] - prev_travel) + 2.0
+        near, foot = dist[j], arc[j]
+        if near <= tolerance and not low <= foot <= high:
+            lo = max(int(np.searchsorted(cum, low)) - 1, 0)
+            hi = min(int(np.searchsorted(cum, high)) + 1, len(cum))
+            part = project_to_polyline(track[j:j + 1], path[lo:hi])
+            near, foot = float(part[0][0]), float(part[1][0]) + cum[lo]
+        if near > tolerance or not low <= foot <= high:
+            return j, feet[:j]
+        feet[j] = foot
+        prev_arc, prev_travel = max(prev_arc, foot), travel[j]
+    return len(track), feet
+
+
+def _rejoin_index(lanes: Lanes, track: np.ndarray, track_yaw: np.ndarray, first: int,
+                  settings: PathSettings) -> int | None:
+    """The first logged position from `first` on where the log is back on a lane: within
+    `log_rejoin_radius_m` of a heading-aligned lane and within the tolerance of one for the next
+    `log_rejoin_length_m` it drives (or to its end). None when it never rejoins."""
+    dist, _ = _aligned_lane_distance(lanes, track[first:], track_yaw[first:], settings.on_route_tolerance_m,
+                                     settings.rejoin_heading_deg)
+    travel = arc_lengths(track[first:])
+    within = dist <= settings.on_route_tolerance_m
+    # Number of consecutive positions within the tolerance from each index on.
+    run = np.zeros(len(dist) + 1, np.int64)
+    for j in range(len(dist) - 1, -1, -1):
+        run[j] = run[j + 1] + 1 if within[j] else 0
+    for j in np.flatnonzero(dist <= settings.log_rejoin_radius_m):
+        horizon = int(np.searchsorted(travel, travel[j] + settings.log_rejoin_length_m, side="right"))
+        if run[j] >= horizon - j:
+            return first + int(j)
+    return None
+
+
+def _thin(xy: np.ndarray, min_step: float) -> np.ndarray:
+    """Indices of the positions kept so that consecutive ones lie >= `min_step` apart (a standing or
+    jittering log would otherwise zig-zag the path). (m, 2) -> (k,)"""
+    keep, last = [], None
+    for j, point in enumerate(xy):
+        if last is None or np.hypot(*(point - last)) >= min_step:
+            keep.append(j)
+            last = point
+    if keep[-1] != len(xy) - 1:
+        keep.append(len(xy) - 1)  # the path must reach the last position
+    return np.asarray(keep, np.int64)
+
+
+def _log_piece(lanes: Lanes, xy: np.ndarray, yaw: np.ndarray, settings: PathSettings) -> _Piece:
+    """Logged positions as path points: z of the nearest lane point, lane index of the nearest
+    heading-aligned lane (-1 when none within `max_change_offset_m`)."""
+    if len(xy) == 0:
+        return _Piece(np.zeros((0, 3)), np.zeros(0, np.int64))
+    keep = _thin(xy, 0.5 * settings.spacing_m)
+    xy, yaw = xy[keep], yaw[keep]
+    _, nearest = lanes.tree.query(xy, k=1)
+    _, lane = _aligned_lane_distance(lanes, xy, yaw, settings.max_change_offset_m, settings.rejoin_heading_deg)
+    return _Piece(np.column_stack([xy, lanes.points[nearest, 2]]), lane)
+
+
+def _continuation(lanes: Lanes, graph: LaneGraph, end: np.ndarray, yaw: float, settings: PathSettings) -> _Piece:
+    """Past the end of a log that left the lanes: along the nearest heading-aligned lane, blended in from
+    the end point (smoothstep, over 4x the lateral offset, `min_change_length_m`..`default_change_length_m`),
+    else straight on along the last heading. Starts exactly at `end` (3,)."""
+    heading = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+    quick = dataclasses.replace(settings, max_candidates=1, max_lane_changes=0, bridge_gaps=False)
+    starts = start_lanes(lanes, end, yaw, quick)
+    found = _enumerate(lanes, graph, starts, np.zeros((0, 2)), np.zeros(0), quick) if starts else []
+    if not found:
+        length = (settings.points_per_path - 1) * settings.spacing_m
+        steps = np.arange(0.0, length + 1e-6, settings.spacing_m)
+        return _Piece(end + steps[:, None] * heading, np.full(len(steps), -1, np.int64))
+    lane_path = _resample(found[0], settings)
+    cum = arc_lengths(lane_path.xyz)
+    offset = float(np.linalg.norm(lane_path.xyz[0, :2] - end[:2]))
+    ramp = min(float(np.clip(4.0 * offset, settings.min_change_length_m, settings.default_change_length_m)), cum[-1])
+    steps = np.arange(0.0, ramp, settings.spacing_m)
+    on_lane = point_at_arc(lane_path.xyz, cum, steps)
+    u = steps / max(ramp, 1e-6)
+    weight = (u * u * (3.0 - 2.0 * u))[:, None]
+    blended = (1.0 - weight) * (end + steps[:, None] * heading) + weight * on_lane
+    rest = cum >= ramp
+    lane = lane_path.lane[np.clip(np.searchsorted(cum, steps, side="right") - 1, 0, len(cum) - 1)]
+    return _Piece(np.vstack([blended, lane_path.xyz[rest]]), np.concatenate([lane, lane_path.lane[rest]]))
+
+
+def _head(path: _Piece, arc: float) -> _Piece:
+    """The part of a resampled path up to arc length `arc` (its end interpolated)."""
+    cum = arc_lengths(path.xyz)
+    inner = cum < arc
+    end = point_at_arc(path.xyz, cum, [arc])
+    segment = int(np.clip(np.searchsorted(cum, arc, side="right") - 1, 0, len(cum) - 1))
+    return _Piece(np.vstack([path.xyz[inner], end]), np.concatenate([path.lane[inner], [path.lane[segment]]]))
+
+
+def _fits(track: np.ndarray, candidates: list[_Piece]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(distance, foot arc) of every logged position on each candidate. -> [((m,), (m,))]"""
+    return [project_to_polyline(track, path.xyz)[:2] for path in candidates]
+
+
+def _pull_to_log(path: _Piece, log: np.ndarray, length: float, at_end: bool) -> _Piece:
+    """The path with its last (`at_end`) or first `length` metres moved sideways onto the logged positions
+    `log` (k, 2) beside them: fully at its end (start) point, fading out smoothly (smoothstep), so that a
+    lane path meets a stretch that follows the log without a jump."""
+    if len(path.xyz) < 2 or len(log) == 0:
+        return path
+    cum = arc_lengths(path.xyz)
+    _, arc, foot = project_to_polyline(log, path.xyz)
+    order = np.argsort(arc, kind="stable")
+    arc, shift = arc[order], (log - foot)[order]  # (k,), (k, 2): from the path to the log
+    length = max(min(length, cum[-1]), 1e-6)
+    u = np.clip((cum - (cum[-1] - length)) / length if at_end else (length - cum) / length, 0.0, 1.0)
+    weight = u * u * (3.0 - 2.0 * u)  # (q,)
+    xyz = path.xyz.copy()
+    for k in range(2):
+        xyz[:, k] += weight * np.interp(cum, arc, shift[:, k])
+    return _Piece(xyz, path.lane)
+
+
+def _follow_log(lanes: Lanes, graph: LaneGraph, candidates: list[_Piece], fits: list[tuple[np.ndarray, np.ndarray]],
+                track: np.ndarray, track_yaw: np.ndarray, settings: PathSettings, depth: int = 0) -> _Piece:
+    """A path through every logged position (see the module docstring): the candidate that covers the
+    whole log, else the one covering it longest, spliced with the log. `track` (m >= 1, 2); `fits`
+    from `_fits(track, candidates)`."""
+    travel = arc_lengths(track)
+    best, best_key, best_fit = None, None, None
+    for path, (dist, arc) in zip(candidates, fits):
+        covered, feet = _covered_prefix(track, travel, path.xyz, dist, arc, settings.on_route_tolerance_m)
+        # Whole log covered first, then the longest covered stretch, then the smallest mean distance.
+        key = (covered == len(track), travel[covered - 1] if covered else -1.0, -float(dist.mean()))
+        if best_key is None or key > best_key:
+            best, best_key, best_fit = path, key, (dist, feet, covered)
+    if best_key is not None and best_key[0]:
+        return best
+    head = _Piece(np.zeros((0, 3)), np.zeros(0, np.int64))
+    covered = best_fit[2] if best is not None else 0
+    # A lane path that covers less than the blend length is dropped: it would start beside the log and
+    # swerve onto it.
+    kept = covered if covered and travel[covered - 1] >= settings.splice_blend_m else 0
+    if kept:
+        # Keep the lane path up to the last covered position, its end pulled onto the log (no sideways jump).
+        feet = best_fit[1]
+        near = travel[:covered] >= travel[covered - 1] - 2.0 * settings.splice_blend_m
+        head = _pull_to_log(_head(best, float(feet[covered - 1])), track[:covered][near], settings.splice_blend_m,
+                            at_end=True)
+    # The log rejoins a lane only past where the kept lane path stops covering it, and at least one
+    # position on: a new search from where this one started would find the same paths again.
+    diverge = max(covered, 1)
+    rejoin = (_rejoin_index(lanes, track, track_yaw, diverge, settings)
+              if depth < settings.max_log_splices and diverge < len(track) else None)
+    stop = len(track) if rejoin is None else rejoin
+    bridge = _log_piece(lanes, track[kept:stop], track_yaw[kept:stop], settings)
+    if rejoin is None:
+        tail = _continuation(lanes, graph, bridge.xyz[-1], float(track_yaw[-1]), settings)
+    else:
+        narrow = dataclasses.replace(settings, max_candidates=min(settings.max_candidates,
+                                                                  settings.splice_search_candidates),
+                                     max_expansions=min(settings.max_expansions, settings.splice_search_expansions))
+        rest, rest_yaw = track[rejoin:], track_yaw[rejoin:]
+        starts = start_lanes(lanes, np.array([*rest[0], 0.0]), float(rest_yaw[0]), narrow)
+        found = _candidates(lanes, graph, starts, rest, rest_yaw, narrow) if starts else []
+        tail = _follow_log(lanes, graph, found, _fits(rest, found), rest, rest_yaw, narrow, depth + 1)
+        # The lane path found there starts beside the log: pull its start onto it.
+        near = arc_lengths(rest) <= 2.0 * settings.splice_blend_m
+        tail = _pull_to_log(tail, rest[near], settings.splice_blend_m, at_end=False)
+    return _Piece(np.vstack([head.xyz, bridge.xyz, tail.xyz]), np.concatenate([head.lane, bridge.lane, tail.lane]))
 
 
 def search_paths(lanes: Lanes, graph: LaneGraph, position: np.ndarray, yaw: float, track: np.ndarray,
                  track_yaw: np.ndarray | None = None, settings: PathSettings = PathSettings()) -> list[Path]:
     """Ranked paths (best first, at most `num_paths`) from a start pose; `track` (m, 2) holds the
     logged positions from the start step onward and `track_yaw` (m,) their headings, used to guide,
-    rank and mark on-route paths. Returns [] when no lane lies near the start pose."""
+    rank and mark on-route paths, and followed where no lane path covers them (`follow_log`).
+    Returns [] when no lane lies near the start pose."""
     position = np.asarray(position, np.float64)
     track = np.asarray(track, np.float64).reshape(-1, 2)
     track_yaw = np.full(len(track), yaw) if track_yaw is None else np.asarray(track_yaw, np.float64)
     starts = start_lanes(lanes, position, yaw, settings)
     if not starts:
         return []
+    candidates = _candidates(lanes, graph, starts, track, track_yaw, settings)
+    fits = _fits(track, candidates)
+    followed = None
+    if settings.follow_log and len(track):
+        followed = _follow_log(lanes, graph, candidates, fits, track, track_yaw, settings)
+        if not any(followed is c for c in candidates):
+            followed = _resample((followed,), settings)
+            candidates, fits = [followed] + candidates, _fits(track, [followed]) + fits
     paths: list[Path] = []
-    seen: set = set()
-    for pieces in _enumerate(lanes, graph, starts, track, track_yaw, settings):
-        xyz, lane_id, arc = _resample(pieces, lanes, settings)
-        key = (tuple(lane_id[np.r_[True, lane_id[1:] != lane_id[:-1]]]), len(xyz), tuple(np.round(xyz[-1, :2], 1)))
-        if key in seen:
-            continue
-        seen.add(key)
+    first = None  # the path that follows the log ranks first, the rest by mean distance
+    for candidate, (dist, _) in zip(candidates, fits):
+        xyz = candidate.xyz
+        lane_id = np.where(candidate.lane >= 0, lanes.ids[np.maximum(candidate.lane, 0)], -1)
+        arc = np.arange(len(xyz)) * settings.spacing_m
         if len(track) and len(xyz) > 1:
-            dist = project_to_polyline(track, xyz)[0]
             mean, on_route = (float(dist.mean()),
                               bool(np.mean(dist <= settings.on_route_tolerance_m) >= settings.on_route_fraction))
         else:
             mean, on_route = 0.0, len(track) == 0
         paths.append(Path(xyz, lane_id, arc, mean, on_route))
-    paths.sort(key=lambda p: p.mean_distance)
+        first = paths[-1] if candidate is followed else first
+    paths.sort(key=lambda p: (p is not first, p.mean_distance))
     return paths[: settings.num_paths]
 
 

@@ -2,7 +2,9 @@
 
     uint64 length | uint32 masked_crc32c(length bytes) | data | uint32 masked_crc32c(data)
 
-(little-endian). CRCs are checked on read; any damage raises `RecordError` naming file and offset.
+(little-endian). CRCs are checked on read; any damage raises `RecordError` naming the file once. A first
+record whose length header fails its CRC means the file is not a TFRecord at all (a text file, a gzip
+archive, a parquet table); a later failure means record N is corrupt.
 """
 
 from __future__ import annotations
@@ -23,7 +25,31 @@ MAX_RECORD_BYTES = 1 << 31
 
 
 class RecordError(ValueError):
-    """A TFRecord file is damaged: the message names the file, the byte offset and the problem."""
+    """A file is not a TFRecord or is damaged: the message is `FILE: problem`, the file named once.
+
+    `path` and `problem` hold the two parts, for callers that put the file in their own prefix."""
+
+    path: str = ""
+    problem: str = ""
+
+
+def _record_error(name: str, problem: str) -> RecordError:
+    error = RecordError(f"{name}: {problem}")
+    error.path, error.problem = name, problem
+    return error
+
+
+_GZIP_MAGIC = b"\x1f\x8b"
+
+
+def _not_a_tfrecord(name: str, header: bytes) -> RecordError:
+    """The first record's header is not one: the file was never a TFRecord (say what it looks like when
+    that is cheap to tell)."""
+    if header.startswith(_GZIP_MAGIC):
+        return _record_error(name, "not a TFRecord file (it is gzip-compressed: decompress it first, e.g. gunzip)")
+    if len(header) < _HEADER.size:
+        return _record_error(name, f"not a TFRecord file ({len(header)} bytes, too short for a record header)")
+    return _record_error(name, f"not a TFRecord file (its first {_HEADER.size} bytes are not a record header)")
 
 
 def masked_crc32c(data: bytes) -> int:
@@ -45,25 +71,63 @@ def iter_records(path: str | os.PathLike, check_crc: bool = True) -> Iterator[by
 
 def iter_records_from_stream(stream: BinaryIO, name: str, check_crc: bool = True) -> Iterator[bytes]:
     offset = 0
+    index = 0
     while True:
-        header = stream.read(_HEADER.size)
-        if not header:
+        length = _read_length(stream, name, index, offset, check_crc)
+        if length is None:
             return
-        if len(header) < _HEADER.size:
-            raise RecordError(f"{name}: truncated record header at byte {offset}")
-        length, length_crc = _HEADER.unpack(header)
-        if check_crc and masked_crc32c(header[:8]) != length_crc:
-            raise RecordError(f"{name}: corrupted record length (CRC mismatch) at byte {offset}")
-        if length > MAX_RECORD_BYTES:
-            raise RecordError(f"{name}: record length {length} is implausible at byte {offset}")
         data = stream.read(length)
         footer = stream.read(_FOOTER.size)
         if len(data) < length or len(footer) < _FOOTER.size:
-            raise RecordError(f"{name}: truncated record at byte {offset} (expected {length} bytes of data)")
+            raise _record_error(name, f"truncated record at byte {offset} (expected {length} bytes of data)")
         if check_crc and masked_crc32c(data) != _FOOTER.unpack(footer)[0]:
-            raise RecordError(f"{name}: corrupted record data (CRC mismatch) at byte {offset}")
+            raise _record_error(name, f"corrupt record {index}: data CRC mismatch at byte {offset}")
         yield data
         offset += _HEADER.size + length + _FOOTER.size
+        index += 1
+
+
+def _read_length(stream: BinaryIO, name: str, index: int, offset: int, check_crc: bool) -> int | None:
+    """The data length of record `index` from its header at `offset`; None at a clean end of file."""
+    header = stream.read(_HEADER.size)
+    return record_length(header, name, index, offset, check_crc) if header else None
+
+
+def record_length(header: bytes, name: str, index: int, offset: int, check_crc: bool = True) -> int:
+    """The data length in the header of record `index` (at byte `offset` of file `name`). RecordError when it
+    is not a valid header: on the first record the file is not a TFRecord, later the record is corrupt."""
+    if len(header) < _HEADER.size:
+        problem = "truncated"
+    else:
+        length, length_crc = _HEADER.unpack(header[:_HEADER.size])
+        if check_crc and masked_crc32c(header[:8]) != length_crc:
+            problem = "length CRC mismatch"
+        elif length > MAX_RECORD_BYTES:  # refuse to allocate what a damaged header claims
+            problem = f"implausible length {length}"
+        else:
+            return length
+    if index == 0:
+        raise _not_a_tfrecord(name, header)
+    if problem == "truncated":
+        raise _record_error(name, f"truncated record header at byte {offset}")
+    raise _record_error(name, f"corrupt record {index}: {problem} at byte {offset}")
+
+
+def count_records(path: str | os.PathLike, limit: int | None = None) -> int:
+    """The number of records in a TFRecord file (at most `limit`), from the length headers only: the data
+    is skipped, not read or checked (a truncated last record still counts). Raises RecordError like
+    `iter_records` for a damaged header."""
+    name = str(path)
+    count, offset = 0, 0
+    with open(path, "rb") as stream:
+        while limit is None or count < limit:
+            length = _read_length(stream, name, count, offset, check_crc=True)
+            if length is None:
+                break
+            offset += _HEADER.size + length + _FOOTER.size
+            stream.seek(offset)
+            count += 1
+    return count
 
 
 class TFRecordWriter:

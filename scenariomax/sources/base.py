@@ -16,9 +16,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Protocol, Union
 
-
-class InputError(ValueError):
-    """A raw input file is unreadable or malformed. The message is one line naming file and reason."""
+from scenariomax.errors import InputError  # its former home: importers of it from here keep working
 
 
 @dataclasses.dataclass(frozen=True)

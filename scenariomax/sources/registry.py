@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Mapping
+from pathlib import Path
+
+from scenariomax.errors import InputError
 from scenariomax.schema import Sizes
-from scenariomax.sources.base import InputError, Source
+from scenariomax.sources.base import Source
 
 DATASETS = ("synthetic", "womd", "nuplan", "av2", "scenarionet", "gpudrive")
 
@@ -16,6 +21,11 @@ def make_source(dataset: str, *, src: str | None = None, sizes: Sizes | None = N
         from scenariomax.sources.synthetic import SyntheticSource
 
         return SyntheticSource(num_scenarios=num_scenarios, seed=seed, sizes=sizes)
+    if dataset == "nuplan":
+        from scenariomax.sources.nuplan import NuplanSource
+
+        src, maps = nuplan_locations(src, maps, os.environ)
+        return NuplanSource(src=src, maps_root=maps, sizes=sizes, stride_steps=stride_steps)
     if src is None:
         raise InputError(f"--dataset {dataset} needs --src (the raw files or directory)")
     if dataset == "womd":
@@ -34,10 +44,20 @@ def make_source(dataset: str, *, src: str | None = None, sizes: Sizes | None = N
         from scenariomax.sources.gpudrive import GpuDriveSource
 
         return GpuDriveSource(src=src, sizes=sizes)
-    if dataset == "nuplan":
-        from scenariomax.sources.nuplan import NuplanSource
-
-        if maps is None:
-            raise InputError("--dataset nuplan needs --maps (the nuPlan maps root folder)")
-        return NuplanSource(src=src, maps_root=maps, sizes=sizes, stride_steps=stride_steps)
     raise InputError(f"unknown dataset {dataset!r}; choose one of {', '.join(DATASETS)}")
+
+
+def nuplan_locations(src: str | None, maps: str | None, environ: Mapping[str, str]) -> tuple[str, str]:
+    """--src and --maps for nuPlan, defaulting to the devkit's variables as its users have them set:
+    NUPLAN_DB_FILES (the log databases) else NUPLAN_DATA_ROOT (searched for .db files), and NUPLAN_MAPS_ROOT
+    else NUPLAN_DATA_ROOT/maps. Raises one InputError naming every missing location at once."""
+    data_root = environ.get("NUPLAN_DATA_ROOT")
+    src = src or environ.get("NUPLAN_DB_FILES") or data_root
+    if maps is None:
+        maps = environ.get("NUPLAN_MAPS_ROOT") or (str(Path(data_root) / "maps") if data_root else None)
+    missing = [name for name, value in (("--src (or NUPLAN_DB_FILES / NUPLAN_DATA_ROOT)", src),
+                                        ("--maps (or NUPLAN_MAPS_ROOT)", maps)) if not value]
+    if missing:
+        raise InputError(f"--dataset nuplan needs {' and '.join(missing)}: the log databases and the maps root "
+                         "folder, as flags or the nuPlan devkit's environment variables")
+    return src, maps

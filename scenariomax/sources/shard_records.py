@@ -9,10 +9,12 @@ import dataclasses
 from collections.abc import Iterator
 
 from scenariomax.codec import SchemaError, decode_scenario
+from scenariomax.errors import InputError
 from scenariomax.io.example import ExampleError
+from scenariomax.io.record_kind import WOMD_SCENARIO_NOT_A_SHARD, looks_like_womd_scenario
 from scenariomax.io.tfrecord import RecordError, iter_records
 from scenariomax.shards import list_shard_files
-from scenariomax.sources.base import Failure, InputError, UnitItem
+from scenariomax.sources.base import Failure, UnitItem
 
 
 @dataclasses.dataclass(frozen=True)
@@ -22,9 +24,11 @@ class ShardRecordsSource:
 
     def list_units(self) -> list[str]:
         try:
-            return [str(path) for path in list_shard_files(self.src)]
+            units = [str(path) for path in list_shard_files(self.src)]
         except FileNotFoundError as error:
             raise InputError(str(error)) from None
+        _refuse_raw_womd_scenarios(units[0])  # the usual mistake: a whole folder of them, said once up front
+        return units
 
     def read_unit(self, unit: str) -> Iterator[UnitItem]:
         try:
@@ -32,7 +36,9 @@ class ShardRecordsSource:
                 try:
                     scenario = decode_scenario(data)
                 except (ExampleError, SchemaError, UnicodeDecodeError) as error:
-                    yield Failure(unit, f"record {index}", f"{unit}: record {index}: {error}")
+                    if index == 0 and looks_like_womd_scenario(data):  # the whole file is raw WOMD
+                        raise InputError(f"{unit}: {WOMD_SCENARIO_NOT_A_SHARD}") from None
+                    yield Failure(unit, f"record {index}", str(error))  # the failure names the file already
                     continue
                 if not scenario.source_dataset:
                     scenario = scenario.replace(source_dataset="womd")  # raw WOMD tf.Example input
@@ -42,3 +48,16 @@ class ShardRecordsSource:
 
     def settings(self) -> dict:
         return {"src": self.src}
+
+
+def _refuse_raw_womd_scenarios(unit: str) -> None:
+    """InputError when the file's first record is a raw WOMD Scenario proto (one record read)."""
+    records = iter_records(unit)
+    try:
+        first = next(records, None)
+    except (RecordError, OSError):
+        return  # read_unit reports it, for this file only
+    finally:
+        records.close()
+    if first is not None and looks_like_womd_scenario(first):
+        raise InputError(f"{unit}: {WOMD_SCENARIO_NOT_A_SHARD}")

@@ -15,9 +15,9 @@ import struct
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from scenariomax.errors import InputError
 from scenariomax.inspect import summarize_scenario
-from scenariomax.io.tfrecord import MAX_RECORD_BYTES, masked_crc32c
-from scenariomax.sources.base import InputError
+from scenariomax.io.tfrecord import RecordError, masked_crc32c, record_length
 from scenariomax.validate import RecordCheck, check_record, resolve_files
 
 _HEADER = struct.Struct("<QI")
@@ -136,16 +136,14 @@ def _walk_file(path: Path, file_index: int) -> tuple[list[IndexEntry], str]:
             size = os.fstat(fd).st_size
             offset = 0
             while offset < size:
-                header = os.pread(fd, _HEADER.size, offset)
-                length, length_crc = _HEADER.unpack(header) if len(header) == _HEADER.size else (0, None)
-                if length_crc is None:
-                    error_text = f"{path}: truncated record header at byte {offset}"
-                elif masked_crc32c(header[:8]) != length_crc:
-                    error_text = f"{path}: corrupted record length (CRC mismatch) at byte {offset}"
-                elif length > MAX_RECORD_BYTES or offset + _HEADER.size + length + 4 > size:
-                    error_text = f"{path}: truncated record at byte {offset}"
-                if error_text:
+                try:  # the reader's own header check: "not a TFRecord file" / "corrupt record N" alike
+                    length = record_length(os.pread(fd, _HEADER.size, offset), str(path), len(frames), offset)
+                except RecordError as error:
+                    error_text = str(error)
                     break  # the records before the damage stay listed
+                if offset + _HEADER.size + length + 4 > size:
+                    error_text = f"{path}: truncated record at byte {offset}"
+                    break
                 frames.append((offset + _HEADER.size, length))
                 offset += _HEADER.size + length + 4
             # The skims are independent small reads: overlap them (os.pread releases the GIL), which is what

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
 
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError
 from scenariomax.view.index import ShardIndex, compact_summary
 from scenariomax.view.scene import error_scene, pack_scene, scene_from_scenario
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from cli.scenariomax_cli import main
 from scenariomax import read_shards
+from vmax_cli.scenariomax_cli import main
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 from sdc_path_quality import path_quality  # noqa: E402

@@ -5,7 +5,7 @@ import json
 import pytest
 from click.testing import CliRunner
 
-from cli.scenariomax_cli import main
+from vmax_cli.scenariomax_cli import main
 
 
 def _run(*args):

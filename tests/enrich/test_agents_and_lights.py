@@ -37,6 +37,16 @@ def test_controllable_labels_and_agent_paths():
     assert (stats.num_scenarios, stats.num_with_controllable, stats.mean_per_scenario) == (2, 1, 0.5)
 
 
+def test_agent_path_slots_go_to_the_agents_nearest_the_sdc():
+    sdc = track(straight_xy(150, 8.0))
+    # far agents first in object order: a budget filled in object order would skip the SDC's neighbours
+    starts = [290, 270, 250, 230, 160, 175, 130]
+    objects = [sdc] + [track(straight_xy(x0, 8.0)) for x0 in starts]
+    out = enrich_scenario(make_scenario(_road(), objects), EnrichSettings(infer_lights=False, num_agent_paths=3))
+    assert out.is_controllable[1:].all()
+    assert out.agent_path_object_index.tolist() == [5, 7, 6]  # 10 m, 20 m, 25 m from the SDC
+
+
 def _light_scene(logged_state: int):
     """Lane 1 runs east to a stop point at x=50. Car 1 waits at x=45 until step 40, then drives
     through; car 2 crosses north-bound at x=60 during steps 0-40 (cross traffic)."""

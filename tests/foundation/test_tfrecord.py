@@ -1,10 +1,18 @@
 import struct
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from scenariomax.io.tfrecord import RecordError, TFRecordWriter, frame_record, iter_records, masked_crc32c
+from scenariomax.io.tfrecord import (
+    RecordError,
+    TFRecordWriter,
+    count_records,
+    frame_record,
+    iter_records,
+    masked_crc32c,
+)
 
 
 def test_masked_crc32c_known_value():
@@ -65,4 +73,62 @@ def test_damaged_bytes_give_a_clean_error(tmp_path_factory, cut, flip, mode, gar
         list(iter_records(path))
     except RecordError as error:
         message = str(error)
-        assert "f.tfrecord" in message and "byte" in message and "\n" not in message
+        assert message.count("f.tfrecord") == 1 and "\n" not in message
+        assert "byte" in message or "not a TFRecord file" in message  # where the damage is, or what the file is
+
+
+# --- what a file that is not a TFRecord, or a damaged one, is called --------------------------------------------
+
+def test_a_text_or_gzip_file_is_not_a_tfrecord_rather_than_a_crc_mismatch(tmp_path):
+    text = tmp_path / "notes.tfrecord"
+    text.write_text("scenario_id,x,y\n" * 20)
+    with pytest.raises(RecordError) as error:
+        list(iter_records(text))
+    assert str(error.value) == f"{text}: not a TFRecord file (its first 12 bytes are not a record header)"
+    assert error.value.path == str(text) and error.value.problem.startswith("not a TFRecord file")
+    gzipped = tmp_path / "shard.tfrecord.gz"
+    gzipped.write_bytes(b"\x1f\x8b\x08\x00" + bytes(40))
+    with pytest.raises(RecordError, match="gzip-compressed: decompress it first"):
+        list(iter_records(gzipped))
+    tiny = tmp_path / "tiny.tfrecord"
+    tiny.write_bytes(b"hi\n")
+    with pytest.raises(RecordError, match=r"not a TFRecord file \(3 bytes, too short for a record header\)"):
+        list(iter_records(tiny))
+
+
+def test_damage_after_the_first_record_names_the_corrupt_record(tmp_path):
+    records = [frame_record(bytes([i]) * 10) for i in range(3)]  # 26 bytes each
+    damaged = bytearray(b"".join(records))
+    damaged[2 * 26 + 9] ^= 0xFF  # the length CRC of record 2
+    path = tmp_path / "d.tfrecord"
+    path.write_bytes(bytes(damaged))
+    with pytest.raises(RecordError) as error:
+        list(iter_records(path))
+    assert str(error.value) == f"{path}: corrupt record 2: length CRC mismatch at byte 52"
+    assert str(error.value).count(str(path)) == 1
+
+
+def test_count_records_reads_only_the_headers(tmp_path):
+    path = tmp_path / "n.tfrecord"
+    with TFRecordWriter(path) as writer:
+        for i in range(7):
+            writer.write(bytes(1000 * i))
+    assert count_records(path) == 7 and count_records(path, limit=3) == 3
+    (tmp_path / "text.tfrecord").write_text("hello, world: not records")
+    with pytest.raises(RecordError, match="not a TFRecord file"):
+        count_records(tmp_path / "text.tfrecord")
+
+
+def test_a_raw_womd_scenario_proto_is_told_apart_from_a_tf_example():
+    from scenariomax.io.example import encode_example
+    from scenariomax.io.record_kind import looks_like_womd_scenario
+    from scenariomax.sources.womd.proto import ScenarioProto
+
+    message = ScenarioProto()
+    message.scenario_id = "abc"
+    message.timestamps_seconds.extend([0.0, 0.1])
+    message.tracks.add().id = 7
+    assert looks_like_womd_scenario(message.SerializeToString())
+    example = encode_example({"scenario/id": [b"abc"], "state/x": np.zeros(3, np.float32)})
+    assert not looks_like_womd_scenario(example)
+    assert not looks_like_womd_scenario(b"") and not looks_like_womd_scenario(b"\xff\xff\xff")

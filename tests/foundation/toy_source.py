@@ -7,7 +7,8 @@ import time
 
 import numpy as np
 
-from scenariomax.sources.base import Failure, InputError
+from scenariomax.errors import InputError
+from scenariomax.sources.base import Failure
 from tests.conftest import straight_road_scenario
 
 

@@ -12,6 +12,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import ClassVar
 
+from scenariomax.errors import InputError
 from scenariomax.schema import Sizes, default_sizes
 from scenariomax.sources.av2.convert import build_scenario
 from scenariomax.sources.av2.errors import Av2FormatError, Av2ScenarioError
@@ -23,7 +24,7 @@ from scenariomax.sources.av2.tracks import (
     read_columns,
     split_scenarios,
 )
-from scenariomax.sources.base import Failure, InputError, UnitItem
+from scenariomax.sources.base import Failure, UnitItem
 
 SCENARIO_PATTERN = "scenario_*.parquet"
 MAP_PATTERN = "log_map_archive_*.json"

@@ -21,10 +21,10 @@ from scenariomax.sources.base import MANIFEST_NOTES
 from scenariomax.sources.gpudrive import tracks as trk
 from scenariomax.sources.gpudrive.layout import RawScenario
 from scenariomax.sources.gpudrive.roads import light_arrays, map_polylines
+from scenariomax.sources.sanity import id_list  # lists of more than MAX_LISTED_IDS ids become a count
 from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, window_starts
 
 SOURCE_NAME = "gpudrive"
-MAX_LISTED_IDS = 20  # object ids listed per note in the manifest; longer lists give a count
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,11 +41,6 @@ class CleanTracks:
     types: np.ndarray  # (N,) int64 schema object types
     ids: np.ndarray  # (N,) int64
     notes: dict
-
-
-def _id_list(ids: np.ndarray, mask: np.ndarray) -> list[int] | int:
-    chosen = [int(i) for i in ids[mask]]
-    return chosen if len(chosen) <= MAX_LISTED_IDS else len(chosen)
 
 
 def object_ids(raw: RawScenario) -> tuple[np.ndarray, str | None]:
@@ -80,13 +75,13 @@ def clean_tracks(raw: RawScenario) -> CleanTracks:
     if num_flips:
         notes["yaw_flips_fixed"] = num_flips
     if (boxes.swapped & seen).any():
-        notes["boxes_swapped"] = _id_list(ids, boxes.swapped & seen)  # clearly wider than long: length <-> width
+        notes["boxes_swapped"] = id_list(ids, boxes.swapped & seen)  # clearly wider than long: length <-> width
     if (boxes.defaulted & seen).any():
-        notes["box_sizes_defaulted"] = _id_list(ids, boxes.defaulted & seen)  # missing or not positive in the file
+        notes["box_sizes_defaulted"] = id_list(ids, boxes.defaulted & seen)  # missing or not positive in the file
     if np.isnan(raw.height).all():
         notes["heights"] = "type defaults (the file has no heights)"
     elif (boxes.height_defaulted & seen).any():
-        notes["heights_defaulted"] = _id_list(ids, boxes.height_defaulted & seen)
+        notes["heights_defaulted"] = id_list(ids, boxes.height_defaulted & seen)
     if derived.any():
         notes["velocity_derived_steps"] = int(derived.sum())  # absent or inconsistent with the positions
     if not has_z:

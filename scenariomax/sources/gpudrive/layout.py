@@ -34,7 +34,8 @@ from typing import NoReturn
 
 import numpy as np
 
-from scenariomax.sources.base import InputError, parse_json
+from scenariomax.errors import InputError
+from scenariomax.sources.base import parse_json
 
 LAYOUT_NOCTURNE = "nocturne"
 LAYOUT_GPUDRIVE_3D = "gpudrive-3d"

@@ -6,8 +6,9 @@ import dataclasses
 from collections.abc import Iterator
 from pathlib import Path
 
+from scenariomax.errors import InputError
 from scenariomax.schema import Sizes
-from scenariomax.sources.base import Failure, InputError, UnitItem, expand_inputs
+from scenariomax.sources.base import Failure, UnitItem, expand_inputs
 from scenariomax.sources.gpudrive.convert import SOURCE_NAME, scenario_windows
 from scenariomax.sources.gpudrive.layout import INDEX_FILES, parse_document, read_json
 from scenariomax.sources.womd.source import one_line

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 import numpy as np
 import shapely
 
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError
 from scenariomax.sources.nuplan import utm
 from scenariomax.sources.nuplan.sqlite_access import fetch_all, one_line, require_columns, table_columns
 

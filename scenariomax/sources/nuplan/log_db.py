@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from scenariomax import schema as sch
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError
 from scenariomax.sources.nuplan.ego import quaternion_yaw
 from scenariomax.sources.nuplan.sqlite_access import fetch_all, require_columns, table_columns
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import shapely
 
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError
 from scenariomax.sources.nuplan import utm
 from scenariomax.sources.nuplan.geopackage import read_layer
 from scenariomax.sources.nuplan.sqlite_access import fetch_all, open_readonly, table_columns

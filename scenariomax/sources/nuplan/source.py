@@ -9,8 +9,9 @@ from typing import ClassVar
 
 import shapely
 
+from scenariomax.errors import InputError
 from scenariomax.schema import Sizes, default_sizes
-from scenariomax.sources.base import Failure, InputError, expand_inputs
+from scenariomax.sources.base import Failure, expand_inputs
 from scenariomax.sources.nuplan.convert import build_scenario, scenario_id, window_time_span
 from scenariomax.sources.nuplan.log_db import LogSlice, read_log_index, read_log_slice
 from scenariomax.sources.nuplan.map_reader import find_map_file, load_city_map

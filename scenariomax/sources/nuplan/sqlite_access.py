@@ -6,7 +6,7 @@ import sqlite3
 from collections.abc import Sequence
 from pathlib import Path
 
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError
 
 
 def open_readonly(path: str) -> sqlite3.Connection:

@@ -31,11 +31,12 @@ from scenariomax.enrich.roadgraph import (
 )
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
+from scenariomax.sources.base import MANIFEST_NOTES
+from scenariomax.sources.sanity import STEP_SECONDS, is_nominal_10hz, swap_rows, wider_than_long
 from scenariomax.sources.womd.convert import ScenarioBuildError
 from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, window_starts, wrap_angle
 
 SOURCE_NAME = "scenarionet"
-STEP_SECONDS = 0.1
 MPH_TO_MPS, KMH_TO_MPS = 0.44704, 1.0 / 3.6
 
 # What one description may make us build (the unpickler already caps the file and its expansion;
@@ -178,15 +179,6 @@ def source_times(desc: Mapping, num_steps: int) -> np.ndarray:
     if not (np.isfinite(step) and step > 0):
         raise ScenarioBuildError(f"bad time step {step}")
     return np.arange(num_steps) * step
-
-
-def is_nominal_10hz(times: np.ndarray) -> bool:
-    """Steps 0.1 s apart up to timestamp jitter (WOMD logs wobble by ~10 ms), no frame dropped."""
-    if len(times) < 2:
-        return True
-    steps = np.diff(times)
-    return abs(float(np.median(steps)) - STEP_SECONDS) < 1e-3 and bool(
-        np.all(np.abs(steps - STEP_SECONDS) < 0.5 * STEP_SECONDS))
 
 
 def grid_steps(times: np.ndarray) -> int:
@@ -533,6 +525,8 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iter
     sdc = keys.index(sdc_key) if sdc_key is not None else derived_sdc(
         keys, object_types, source_arrays["valid"], source_arrays["position"])
     arrays = resample_tracks(source_arrays, plan)
+    swapped = wider_than_long(arrays["length"], arrays["width"], object_types, arrays["valid"])
+    arrays["length"], arrays["width"] = swap_rows(arrays["length"], arrays["width"], swapped)
     num_steps_10hz = arrays["valid"].shape[1]
     given_current = meta.get("current_time_index")
     current = int(given_current) if plan is None and _given(given_current) else sizes.num_past
@@ -570,6 +564,8 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iter
             **{name: value[:, cut] for name, value in lights.items()},
             source_dataset=SOURCE_NAME, current_time_index=sizes.num_past,
             metadata={"dataset": str(meta.get("dataset", "")), "log_start_step": start,
-                      "sdc_derived": sdc_key is None},
+                      "sdc_derived": sdc_key is None,
+                      **({MANIFEST_NOTES: {"boxes_swapped": [str(keys[i]) for i in np.flatnonzero(swapped)]}}
+                         if swapped.any() else {})},
         )
         yield fit_to_budget(scenario, sizes)

@@ -12,8 +12,9 @@ import os
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
+from scenariomax.errors import InputError
 from scenariomax.schema import Sizes
-from scenariomax.sources.base import Failure, InputError, UnitItem, expand_inputs
+from scenariomax.sources.base import Failure, UnitItem, expand_inputs
 from scenariomax.sources.scenarionet.convert import SOURCE_NAME, description_windows, scenario_name
 from scenariomax.sources.scenarionet.unpickle import INDEX_LIMITS, load_pickle
 from scenariomax.sources.womd.source import one_line

@@ -422,7 +422,7 @@ def loads_restricted(data: bytes, limits: PickleLimits = SCENARIO_LIMITS):
 
 def load_pickle(path: str | os.PathLike, limits: PickleLimits = SCENARIO_LIMITS):
     """Reads one pickle file safely. Any problem -> `InputError` naming the file (one line)."""
-    from scenariomax.sources.base import InputError
+    from scenariomax.errors import InputError
 
     try:
         size = os.path.getsize(path)

@@ -6,8 +6,9 @@ import dataclasses
 import re
 from collections.abc import Iterator
 
+from scenariomax.errors import InputError
 from scenariomax.schema import Sizes
-from scenariomax.sources.base import Failure, InputError
+from scenariomax.sources.base import Failure
 from scenariomax.sources.synthetic.generator import generate_scenario, scenario_id
 
 _UNIT = re.compile(r"^synthetic:(\d+)-(\d+)$")
@@ -25,6 +26,10 @@ class SyntheticSource:
         if self.num_scenarios < 0 or self.scenarios_per_unit < 1:
             raise InputError(f"synthetic: need num_scenarios >= 0 and scenarios_per_unit >= 1, got "
                              f"{self.num_scenarios} and {self.scenarios_per_unit}")
+
+    def expected_num_scenarios(self) -> int:
+        """The total the progress bar shows (every unit yields its scenarios)."""
+        return self.num_scenarios
 
     def list_units(self) -> list[str]:
         """Ids like "synthetic:00000-00009" (inclusive index ranges), in order."""

@@ -6,9 +6,10 @@ import dataclasses
 import os
 from collections.abc import Iterator
 
+from scenariomax.errors import InputError
 from scenariomax.io.tfrecord import RecordError, iter_records
 from scenariomax.schema import Sizes
-from scenariomax.sources.base import Failure, InputError, UnitItem, expand_inputs
+from scenariomax.sources.base import Failure, UnitItem, expand_inputs
 from scenariomax.sources.womd.convert import SOURCE_NAME, ScenarioBuildError, parse_scenario, scenario_windows
 from scenariomax.sources.womd.tfexample import (
     FORMAT_AUTO,
@@ -30,7 +31,8 @@ def expand_src(src: str, pattern: str) -> list[str]:
 
 def one_line(error: BaseException) -> str:
     text = " ".join(str(error).split()) or type(error).__name__
-    return text if isinstance(error, (ScenarioBuildError, InputError)) else f"{type(error).__name__}: {text}"
+    user_facing = (ScenarioBuildError, InputError, RecordError)  # their message already says what is wrong
+    return text if isinstance(error, user_facing) else f"{type(error).__name__}: {text}"
 
 
 @dataclasses.dataclass(frozen=True)

@@ -6,9 +6,10 @@ import json
 
 import pytest
 
+from scenariomax.errors import InputError
 from scenariomax.scenario import Scenario
 from scenariomax.sources.av2 import Av2Source
-from scenariomax.sources.base import Failure, InputError
+from scenariomax.sources.base import Failure
 from tests.sources.av2.fixtures import (
     map_of,
     parquet_of,

@@ -10,9 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from scenariomax.errors import InputError
 from scenariomax.scenario import Scenario
 from scenariomax.sources.av2 import Av2Source
-from scenariomax.sources.base import Failure, InputError
+from scenariomax.sources.base import Failure
 from tests.sources.av2.fixtures import map_of, parquet_of, write_scenario_dir
 
 

@@ -11,8 +11,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from scenariomax.errors import InputError
 from scenariomax.scenario import Scenario
-from scenariomax.sources.base import MANIFEST_NOTES, Failure, InputError
+from scenariomax.sources.base import MANIFEST_NOTES, Failure
 from scenariomax.sources.gpudrive import GpuDriveSource
 from tests.sources.gpudrive.fixtures import scene_document, write_document
 

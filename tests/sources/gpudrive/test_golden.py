@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from cli.scenariomax_cli import main
 from scenariomax.pipeline import ConvertSettings, convert
 from scenariomax.scenario import Scenario
 from scenariomax.sources.base import MANIFEST_NOTES, Failure
@@ -17,6 +16,7 @@ from scenariomax.sources.gpudrive import GpuDriveSource
 from scenariomax.sources.registry import make_source
 from scenariomax.validate import validate_shards
 from tests.sources.gpudrive.fixtures import SDC_SPEED, scene_document, scene_lights, write_document
+from vmax_cli.scenariomax_cli import main
 
 LAYOUTS = ("nocturne", "gpudrive-3d", "gpudrive-metadata")
 

@@ -12,7 +12,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from scenariomax import Scenario
-from scenariomax.sources.base import Failure, InputError
+from scenariomax.errors import InputError
+from scenariomax.sources.base import Failure
 from scenariomax.sources.nuplan import NuplanSource
 from tests.sources.nuplan import builders as b
 

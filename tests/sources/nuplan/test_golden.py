@@ -10,7 +10,7 @@ import pytest
 
 from scenariomax import Scenario, decode_scenario, encode_scenario
 from scenariomax import schema as sch
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError
 from scenariomax.sources.nuplan import NuplanSource
 from scenariomax.sources.nuplan.map_features import (
     BOUNDARY_ID_OFFSET,

@@ -29,7 +29,7 @@ REPO = Path(__file__).resolve().parents[3]
 _CHILD = """
 import resource, sys, time
 resource.setrlimit(resource.RLIMIT_AS, (6 << 30, 6 << 30))  # if the caps regress, fail here, not the machine
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError
 from scenariomax.sources.scenarionet import ScenarioNetSource
 path = sys.argv[1]
 start = time.perf_counter()

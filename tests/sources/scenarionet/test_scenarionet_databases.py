@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from scenariomax.errors import InputError
 from scenariomax.scenario import Scenario
-from scenariomax.sources.base import InputError
 from scenariomax.sources.scenarionet import ScenarioNetSource, find_scenario_files
 from tests.sources.scenarionet.fixtures import build_description, write_pickle
 

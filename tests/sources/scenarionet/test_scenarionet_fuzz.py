@@ -8,8 +8,9 @@ import pickle
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from scenariomax.errors import InputError
 from scenariomax.scenario import Scenario
-from scenariomax.sources.base import Failure, InputError
+from scenariomax.sources.base import Failure
 from scenariomax.sources.scenarionet import ScenarioNetSource
 from tests.sources.scenarionet.fixtures import build_description, early_metadrive_description
 

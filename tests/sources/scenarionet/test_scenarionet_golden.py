@@ -9,8 +9,9 @@ import pytest
 
 from scenariomax import schema as sch
 from scenariomax.codec import decode_scenario, encode_scenario
+from scenariomax.errors import InputError
 from scenariomax.scenario import Scenario
-from scenariomax.sources.base import Failure, InputError
+from scenariomax.sources.base import Failure
 from scenariomax.sources.scenarionet import ScenarioNetSource, resample_indices, stable_int_ids
 from tests.sources.scenarionet.fixtures import MAP_IDS, OBJECT_IDS, build_description, write_pickle
 

@@ -12,6 +12,7 @@ import pytest
 from scenariomax.codec import decode_scenario, encode_scenario
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
+from scenariomax.sources.base import MANIFEST_NOTES
 from scenariomax.sources.scenarionet import ScenarioNetSource
 from tests.conftest import realdata_file
 
@@ -124,6 +125,11 @@ def test_nuscenes_databases_match_raw(everything):
             np.testing.assert_allclose(scenario.x[0], ego["position"][window, 0], atol=1e-3, rtol=0)
             np.testing.assert_allclose(scenario.y[0], ego["position"][window, 1], atol=1e-3, rtol=0)
             assert scenario.num_objects == min(len(raw["tracks"]), 128)
+            # nuScenes egos arrive sideways (1.73 m long, 4.08 m wide): swapped, and said in the manifest notes
+            assert float(np.median(ego["length"])) < 2.0 < float(np.median(ego["width"]))
+            assert scenario.length[0, 0] == pytest.approx(float(np.median(ego["width"])), abs=1e-3)
+            assert scenario.width[0, 0] == pytest.approx(float(np.median(ego["length"])), abs=1e-3)
+            assert "ego" in scenario.metadata[MANIFEST_NOTES]["boxes_swapped"]
 
 
 def test_womd_20s_lights_and_jittery_times(everything):

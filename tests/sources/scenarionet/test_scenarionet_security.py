@@ -11,7 +11,7 @@ import pickletools
 import numpy as np
 import pytest
 
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError
 from scenariomax.sources.scenarionet import (
     RefusedGlobalError,
     ScenarioNetSource,

@@ -4,9 +4,10 @@ import pickle
 
 import pytest
 
+from scenariomax.errors import InputError
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
-from scenariomax.sources.base import Failure, InputError
+from scenariomax.sources.base import Failure
 from scenariomax.sources.synthetic import SyntheticSource
 from scenariomax.sources.synthetic import source as source_module
 

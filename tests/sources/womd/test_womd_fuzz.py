@@ -7,9 +7,10 @@ import functools
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from scenariomax.errors import InputError
 from scenariomax.io.tfrecord import frame_record
 from scenariomax.scenario import Scenario
-from scenariomax.sources.base import Failure, InputError
+from scenariomax.sources.base import Failure
 from scenariomax.sources.womd import WomdSource
 from tests.sources.womd.fixtures import build_scenario
 

@@ -9,9 +9,10 @@ import pytest
 
 from scenariomax import schema as sch
 from scenariomax.codec import decode_scenario, encode_scenario
+from scenariomax.errors import InputError
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
-from scenariomax.sources.base import Failure, InputError
+from scenariomax.sources.base import Failure
 from scenariomax.sources.womd import WomdSource, lane_side_vote, window_starts
 from tests.sources.womd.fixtures import (
     CROSSWALK_ID,
