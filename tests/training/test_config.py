@@ -54,3 +54,16 @@ def test_switching_algorithm_resets_its_config():
 def test_config_round_trips_through_json(name):
     config = apply_overrides(preset_config(name), ["reward.weights=speed:0.1", "obs.noise.occlusion=true"])
     assert config_from_dict(config_to_dict(config)) == config
+
+
+def test_chunk_and_pool_refresh_defaults_follow_the_algorithm():
+    from vmax_sim.training.config import chunk_steps, pool_refresh
+
+    sac, ppo = preset_config("sac"), preset_config("ppo")
+    assert (chunk_steps(sac), pool_refresh(sac)) == (25, 5)  # 16 envs x 25 steps = 400 env steps: ~5 episodes
+    # one ppo update is 10,240 env steps (~128 episodes): the whole pool is fresh after every update, so no
+    # scenario is driven dozens of times over (a fixed 4 per 25-update chunk overfitted the pool)
+    assert (chunk_steps(ppo), pool_refresh(ppo)) == (1, 64)
+    fixed = apply_overrides(ppo, ["train.chunk_steps=3", "train.pool_refresh=2"])
+    assert (chunk_steps(fixed), pool_refresh(fixed)) == (3, 2)
+    assert config_from_dict(config_to_dict(ppo)).train.pool_refresh is None  # "auto" survives config.json

@@ -76,7 +76,7 @@ def test_stopped_run_resumes_to_the_uninterrupted_curve(whole_run, tmp_path):
 
 
 def _cli(*args: str, env=None, **kwargs) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cli.vmax_cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "vmax_cli.vmax_cli", *args], capture_output=True, text=True,
                           env=env, **kwargs)
 
 
@@ -123,16 +123,17 @@ def test_kill_9_then_resume_continues_the_curve(synthetic_shards, tmp_path):
     an uninterrupted one."""
     run = tmp_path / "killed"
     args = ["train", "--preset", "sac-mlp", "--quiet", *_cli_overrides(synthetic_shards),
-            "train.total_env_steps=400", "train.checkpoint_every=100"]
-    process = subprocess.Popen([sys.executable, "-m", "cli.vmax_cli", *args, "--out", str(run)],
+            "train.total_env_steps=400", "train.checkpoint_every=100", "train.keep_checkpoints=10"]
+    process = subprocess.Popen([sys.executable, "-m", "vmax_cli.vmax_cli", *args, "--out", str(run)],
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 300
+    # Kill the moment the first checkpoint lands (keep_checkpoints=10: none is pruned while we look).
     while time.time() < deadline and not (run / "checkpoints" / "100").exists():
-        time.sleep(0.5)
-    time.sleep(1.0)
+        time.sleep(0.2)
     os.kill(process.pid, signal.SIGKILL)
     process.wait()
     assert (run / "checkpoints" / "100").exists()
+    assert not (run / "checkpoints" / "400").exists(), "the run finished before it could be killed"
     resumed = _cli("train", "--resume", str(run), "--quiet")
     assert resumed.returncode == 0, resumed.stderr
     whole = _cli(*args, "--out", str(tmp_path / "whole"))

@@ -11,8 +11,10 @@ from vmax_sim.training.config import (
     config_to_dict,
     preset_config,
 )
+from vmax_sim.training.replay import TransitionReplay, replay_add, replay_init, replay_sample
 from vmax_sim.training.run import TrainResult, load_run_config, train
 
-__all__ = ["LoopConfig", "ReplayBuffer", "TrainConfig", "TrainDataConfig", "TrainResult", "apply_overrides",
-           "buffer_add", "buffer_init", "buffer_sample", "config_from_dict", "config_to_dict", "load_run_config",
-           "preset_config", "train", "transition_bytes"]
+__all__ = ["LoopConfig", "ReplayBuffer", "TrainConfig", "TrainDataConfig", "TrainResult", "TransitionReplay",
+           "apply_overrides", "buffer_add", "buffer_init", "buffer_sample", "config_from_dict", "config_to_dict",
+           "load_run_config", "preset_config", "replay_add", "replay_init", "replay_sample", "train",
+           "transition_bytes"]

@@ -37,7 +37,8 @@ class ReplayBuffer:
         return self.num_blocks * self.rows_per_block
 
 
-def _storage_dtype(dtype, float_dtype) -> np.dtype:
+def storage_dtype(dtype, float_dtype) -> np.dtype:
+    """The dtype a leaf of `dtype` is stored in: `float_dtype` for floating-point leaves."""
     return np.dtype(float_dtype) if jnp.issubdtype(dtype, jnp.floating) else np.dtype(dtype)
 
 
@@ -50,14 +51,14 @@ def buffer_init(example, capacity: int, float_dtype=jnp.float32, num_blocks: int
         raise ValueError(f"replay buffer capacity and blocks must be at least 1, got {capacity}, {num_blocks}")
     rows = -(-capacity // num_blocks)
     data = jax.tree.map(lambda leaf: jnp.zeros((num_blocks, rows) + jnp.shape(leaf),
-                                               _storage_dtype(jnp.result_type(leaf), float_dtype)), example)
+                                               storage_dtype(jnp.result_type(leaf), float_dtype)), example)
     return ReplayBuffer(data=data, position=jnp.zeros((), jnp.int32), size=jnp.zeros((), jnp.int32))
 
 
 def transition_bytes(example, float_dtype=jnp.float32) -> int:
     """Bytes one stored transition takes (for the memory budget printed before training)."""
     return int(sum(np.prod(jnp.shape(leaf), dtype=np.int64)
-                   * _storage_dtype(jnp.result_type(leaf), float_dtype).itemsize
+                   * storage_dtype(jnp.result_type(leaf), float_dtype).itemsize
                    for leaf in jax.tree.leaves(example)))
 
 
@@ -80,18 +81,27 @@ def buffer_add(buffer: ReplayBuffer, batch) -> ReplayBuffer:
                         size=jnp.minimum(buffer.size + share, rows_per_block).astype(jnp.int32))
 
 
-def buffer_sample(buffer: ReplayBuffer, key: jax.Array, batch_size: int):
-    """`batch_size` transitions drawn uniformly (with replacement) from the rows written, an equal
-    share from every block; floats returned as float32. batch_size must be a multiple of num_blocks."""
+def sample_rows(buffer: ReplayBuffer, key: jax.Array, batch_size: int) -> jax.Array:
+    """Row indices of `batch_size` transitions drawn uniformly (with replacement) from the rows written, an
+    equal share from every block: (num_blocks, batch_size / num_blocks) int32."""
     blocks = buffer.num_blocks
     if batch_size % blocks:
         raise ValueError(f"a sample of {batch_size} does not split into {blocks} buffer blocks")
-    share = batch_size // blocks
-    rows = jax.random.randint(key, (blocks, share), 0, jnp.maximum(buffer.size, 1))
+    return jax.random.randint(key, (blocks, batch_size // blocks), 0, jnp.maximum(buffer.size, 1))
 
-    def take(store):
-        values = jax.vmap(lambda block, index: block[index])(store, rows)
-        values = values.reshape((batch_size,) + values.shape[2:])
+
+def gather_rows(store, rows: jax.Array):
+    """The rows (num_blocks, share) of a per-block pytree `store` (leaves (num_blocks, N, ...)), blocks
+    flattened into one batch axis; floats returned as float32."""
+    def take(leaf):
+        values = jax.vmap(lambda block, index: block[index])(leaf, rows)
+        values = values.reshape((rows.size,) + values.shape[2:])
         return values.astype(jnp.float32) if jnp.issubdtype(values.dtype, jnp.floating) else values
 
-    return jax.tree.map(take, buffer.data)
+    return jax.tree.map(take, store)
+
+
+def buffer_sample(buffer: ReplayBuffer, key: jax.Array, batch_size: int):
+    """`batch_size` transitions drawn uniformly (with replacement) from the rows written, an equal
+    share from every block; floats returned as float32. batch_size must be a multiple of num_blocks."""
+    return gather_rows(buffer.data, sample_rows(buffer, key, batch_size))

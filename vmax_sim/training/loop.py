@@ -22,7 +22,7 @@ from flax import struct
 from vmax_sim.agents import Learner, Transition
 from vmax_sim.datatypes import SimulatorState
 from vmax_sim.env.learning import EPISODE_FLAGS, LearningEnv, LearningState, StepOutput
-from vmax_sim.training.buffer import ReplayBuffer, buffer_add, buffer_sample
+from vmax_sim.training.replay import TransitionReplay, replay_add, replay_sample
 
 OFF_POLICY = ("sac", "bc_sac", "bc")
 EXPERT_LABELLED = ("bc", "bc_sac")  # learners that read Transition.expert_action
@@ -32,7 +32,7 @@ EXPERT_LABELLED = ("bc", "bc_sac")  # learners that read Transition.expert_actio
 class TrainCarry:
     learner: object  # the learner's state pytree
     env: LearningState  # (num_envs, ...)
-    buffer: ReplayBuffer | None  # replay buffer (off-policy algorithms), None for ppo
+    buffer: TransitionReplay | None  # replay buffer (off-policy algorithms), None for ppo
     key: jax.Array
     env_steps: jax.Array  # () int32 (int64 would need x64), environment steps taken so far
 
@@ -61,12 +61,12 @@ def _sum_stats(stats: dict[str, jax.Array]) -> dict[str, jax.Array]:
     return {name: jnp.sum(values) for name, values in stats.items()}
 
 
-def _updates(learner: Learner, learner_state, buffer: ReplayBuffer, key: jax.Array, num_updates: int,
+def _updates(learner: Learner, learner_state, buffer: TransitionReplay, key: jax.Array, num_updates: int,
              batch_size: int):
     """`num_updates` learner updates on device-sampled batches -> (state, mean metrics)."""
     def one(state, update_key):
         sample_key, learn_key = jax.random.split(update_key)
-        return learner.update(state, buffer_sample(buffer, sample_key, batch_size), learn_key)
+        return learner.update(state, replay_sample(buffer, sample_key, batch_size), learn_key)
 
     state, metrics = jax.lax.scan(one, learner_state, jax.random.split(key, num_updates))
     return state, jax.tree.map(jnp.mean, metrics)
@@ -92,7 +92,7 @@ def make_off_policy_chunk(env: LearningEnv, learner: Learner, algo: str, algo_co
             random_action = jax.random.uniform(random_key, policy_action.shape, minval=-1.0, maxval=1.0)
             action = jnp.where(carry.env_steps < learning_starts, random_action, policy_action)
         env_state, out = env.step(carry.env, action, pool)
-        buffer = buffer_add(carry.buffer, transition_of(out))
+        buffer = replay_add(carry.buffer, transition_of(out))
         env_steps = carry.env_steps + num_envs
         ready = (buffer.size >= algo_config.batch_size) & (env_steps >= learning_starts)
 

@@ -38,10 +38,11 @@ def shard_carry(carry: TrainCarry, pool, mesh: Mesh):
     batched = by_leading_axis(batched).replace(next_scenario=jax.device_put(env.next_scenario, replicated),
                                                key=jax.device_put(env.key, replicated))
     buffer = carry.buffer
-    if buffer is not None:
-        buffer = buffer.replace(data=jax.tree.map(lambda a: jax.device_put(a, split), buffer.data),
-                                position=jax.device_put(buffer.position, replicated),
-                                size=jax.device_put(buffer.size, replicated))
+    if buffer is not None:  # every per-block leaf splits over its leading (block) axis
+        rows = buffer.rows.replace(data=jax.tree.map(lambda a: jax.device_put(a, split), buffer.rows.data),
+                                   position=jax.device_put(buffer.rows.position, replicated),
+                                   size=jax.device_put(buffer.rows.size, replicated))
+        buffer = buffer.replace(rows=rows, kept=jax.tree.map(lambda a: jax.device_put(a, split), buffer.kept))
     carry = carry.replace(learner=jax.device_put(carry.learner, replicated), env=batched, buffer=buffer,
                           key=jax.device_put(carry.key, replicated),
                           env_steps=jax.device_put(carry.env_steps, replicated))

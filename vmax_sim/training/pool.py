@@ -9,6 +9,8 @@ and the time it waited is reported so a slow loader is visible in the logs.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import itertools
 import queue
 import threading
@@ -19,9 +21,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from scenariomax.errors import InputError
 from vmax_sim.data import DataConfig
-from vmax_sim.data.convert import scenario_to_numpy_state, stack_states
-from vmax_sim.data.loader import iter_scenarios
+from vmax_sim.data.convert import stack_states
+from vmax_sim.data.loader import indexed_to_numpy_state, iter_indexed_scenarios
 from vmax_sim.datatypes import SimulatorState
 
 _END = object()
@@ -41,14 +44,14 @@ class ScenarioStream:
         self.waited_s = 0.0  # total time `take` blocked
         self._queue: queue.Queue = queue.Queue(maxsize=max(capacity, 1))
         self._stop = threading.Event()
-        scenarios = itertools.islice(iter_scenarios(config), start, None)
+        scenarios = itertools.islice(iter_indexed_scenarios(config), start, None)  # map indices from the cache
         self._thread = threading.Thread(target=self._fill, args=(scenarios, config), daemon=True)
         self._thread.start()
 
     def _fill(self, scenarios: Iterator, config: DataConfig) -> None:
         try:
             for scenario in scenarios:
-                state = slim_state(scenario_to_numpy_state(scenario, config))
+                state = slim_state(indexed_to_numpy_state(scenario, config))
                 while not self._stop.is_set():
                     try:
                         self._queue.put(state, timeout=0.1)
@@ -88,6 +91,17 @@ class ScenarioStream:
         self._thread.join(timeout=30)
 
 
+def pool_shapes(config: DataConfig, pool_size: int) -> SimulatorState:
+    """Shapes and dtypes (jax.ShapeDtypeStruct leaves) of a pool of `config`'s scenarios, from the first one in
+    file order: jitted functions compile from them before a stream fills its shuffle buffer."""
+    in_order = dataclasses.replace(config, shuffle_seed=None, repeat=False)
+    for item in iter_indexed_scenarios(in_order):
+        state = slim_state(indexed_to_numpy_state(item, in_order))
+        return jax.tree.map(lambda a: jax.ShapeDtypeStruct((pool_size,) + np.shape(a),
+                                                           jax.dtypes.canonicalize_dtype(np.asarray(a).dtype)), state)
+    raise InputError(f"{config.path}: the shard files hold no scenarios")
+
+
 def initial_pool(stream: ScenarioStream, pool_size: int) -> SimulatorState:
     """The first `pool_size` states of a fresh stream, on the device."""
     return jax.device_put(stream.take(pool_size))
@@ -98,13 +112,13 @@ def pool_slots(first_index: int, count: int, pool_size: int) -> np.ndarray:
     return (np.arange(first_index, first_index + count) % pool_size).astype(np.int32)
 
 
-@jax.jit
+@functools.partial(jax.jit, donate_argnums=0)  # in place: no second pool while the new one is written
 def _write_rows(pool: SimulatorState, slots: jax.Array, fresh: SimulatorState) -> SimulatorState:
     return jax.tree.map(lambda p, f: p.at[slots].set(f), pool, fresh)
 
 
 def refresh_pool(pool: SimulatorState, stream: ScenarioStream, count: int) -> SimulatorState:
-    """Swaps the next `count` scenarios of the stream into their pool slots."""
+    """Swaps the next `count` scenarios of the stream into their pool slots (`pool` is donated: use the result)."""
     if count == 0:
         return pool
     pool_size = pool.timestep.shape[0]

@@ -17,7 +17,6 @@ import dataclasses
 import functools
 import json
 import math
-import os
 import resource
 import shutil
 import sys
@@ -29,14 +28,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError
 from vmax_sim.agents import make_learner
-from vmax_sim.data import DataConfig
+from vmax_sim.data import DataConfig, cache_dir
 from vmax_sim.env.learning import LearningEnv
 from vmax_sim.networks import make_encoder
-from vmax_sim.training.buffer import buffer_init, transition_bytes
 from vmax_sim.training.checkpoint import CheckpointStore
-from vmax_sim.training.config import TrainConfig, config_from_dict, config_to_dict
+from vmax_sim.training.config import TrainConfig, chunk_steps, config_from_dict, config_to_dict, pool_refresh
 from vmax_sim.training.logger import RunLogger
 from vmax_sim.training.loop import (
     EXPERT_LABELLED,
@@ -47,8 +45,10 @@ from vmax_sim.training.loop import (
     make_on_policy_chunk,
     transition_of,
 )
+from vmax_sim.training.memory import release_freed_memory
 from vmax_sim.training.parallel import data_mesh, shard_carry
-from vmax_sim.training.pool import ScenarioStream, initial_pool, rebuild_pool, refresh_pool
+from vmax_sim.training.pool import ScenarioStream, initial_pool, pool_shapes, rebuild_pool, refresh_pool
+from vmax_sim.training.replay import MIN_TRUNCATED_LENGTH, lost_last_observations, replay_bytes, replay_init
 
 CONFIG_FILE = "config.json"
 
@@ -89,9 +89,9 @@ def _chunk_function(config: TrainConfig, learner, env: LearningEnv, shapes):
         template = jax.eval_shape(lambda s, b, k: learner.update(s, b, k)[1], learner_shapes, sample,
                                   jax.random.PRNGKey(0))
         template = jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), template)
-        chunk = make_off_policy_chunk(env, learner, config.algo, algo_config, config.train.chunk_steps, template)
+        chunk = make_off_policy_chunk(env, learner, config.algo, algo_config, chunk_steps(config), template)
     else:
-        chunk = make_on_policy_chunk(env, learner, algo_config, config.train.chunk_steps)
+        chunk = make_on_policy_chunk(env, learner, algo_config, chunk_steps(config))
     _CHUNKS[config] = jax.jit(chunk, donate_argnums=(0,))
     return _CHUNKS[config]
 
@@ -115,28 +115,31 @@ def train_data_config(config: TrainConfig, path: str, seed: int) -> DataConfig:
 # ----------------------------------------------------------------------------- embedded synthetic data
 
 
-def cache_dir() -> Path:
-    return Path(os.environ.get("VMAX_CACHE_DIR", Path.home() / ".cache" / "vmax_sim"))
+def _finished_conversion(out: Path) -> bool:
+    try:
+        return json.loads((out / "manifest.json").read_text()).get("state") == "complete"
+    except (OSError, ValueError, AttributeError):  # none yet, or cut short by a crash
+        return False
 
 
 def synthetic_split(num_scenarios: int, seed: int, num_objects: int, print_fn: Callable[[str], None]) -> str:
     """Shards of `num_scenarios` synthetic scenarios drawn with `seed`, generated once into the cache."""
-    from scenariomax.enrich.transform import make_transform
-    from scenariomax.pipeline import ConvertSettings, convert
-    from scenariomax.schema import Sizes
-    from scenariomax.sources.synthetic import SyntheticSource
+    from scenariomax import ConversionError, ConvertSettings, Sizes, SyntheticSource, convert, make_transform
 
     out = cache_dir() / "synthetic" / f"seed{seed}-n{num_scenarios}-objects{num_objects}"
-    if (out / "manifest.json").exists() and json.loads((out / "manifest.json").read_text()).get("state") == "complete":
+    if _finished_conversion(out):
         return str(out)
-    if out.exists():
-        shutil.rmtree(out)  # an unfinished generation of our own cache folder
     print_fn(f"generating {num_scenarios} synthetic scenarios (seed {seed}) into {out} (once; cached)")
     sizes = Sizes(num_objects=num_objects)
     transform, transform_settings = make_transform()
     settings = ConvertSettings(out=out, workers=None, sizes=sizes, progress=True, transform=transform,
-                               transform_settings=transform_settings)
-    result = convert(SyntheticSource(num_scenarios=num_scenarios, seed=seed, sizes=sizes), settings)
+                               transform_settings=transform_settings, resume=out.exists())
+    source = SyntheticSource(num_scenarios=num_scenarios, seed=seed, sizes=sizes)
+    try:
+        result = convert(source, settings)  # an interrupted generation continues where it stopped
+    except ConversionError:  # our cache folder, left by another version: start it again
+        shutil.rmtree(out)
+        result = convert(source, dataclasses.replace(settings, resume=False))
     if result.num_scenarios == 0:
         raise InputError(f"{out}: the synthetic generator produced no scenarios")
     return str(out)
@@ -216,45 +219,75 @@ class TrainingSetup:
 
 
 def setup_training(config: TrainConfig, train_path: str, print_fn: Callable[[str], None] = print,
-                   consumed: int | None = None) -> TrainingSetup:
+                   consumed: int | None = None, compile_also: Callable | None = None) -> TrainingSetup:
     """Fresh carry, scenario pool and jitted chunk of `config` (the pool as after `consumed` scenarios when
-    resuming; the caller then restores the carry from the checkpoint)."""
+    resuming; the caller then restores the carry from the checkpoint). compile_also(learner state shapes) runs
+    with the other compilations, before the data and the replay buffer take their memory."""
     loop, algo_config = config.train, config.algo_config
     env, learner = components(config)
     num_envs = algo_config.num_envs
     mesh = data_mesh(num_envs)
+    blocks = mesh.size if mesh else 1
     data_config = train_data_config(config, train_path, loop.seed)
     env_key, learner_key, loop_key = jax.random.split(jax.random.PRNGKey(loop.seed), 3)
+    float_dtype = _float_dtype(loop.buffer_dtype)
+    # jitted: run eagerly, reset and init leave ~1 GB of freed-but-kept host memory behind
+    reset, init = jax.jit(env.reset, static_argnums=1), jax.jit(learner.init)
+
+    def fresh_carry(pool) -> TrainCarry:
+        """Environments, learner, key and step; the replay buffer is added apart (fresh, so never copied)."""
+        env_state = reset(pool, num_envs, env_key)
+        learner_state = init(learner_key, env_state.observation)
+        carry = TrainCarry(learner=learner_state, env=env_state, buffer=None, key=loop_key,
+                           env_steps=jnp.zeros((), jnp.int32))
+        return jax.tree.map(lambda a: jnp.array(a, copy=True), carry)  # distinct buffers: the chunk donates them
+
+    def fresh_replay():
+        return replay_init(example, algo_config.buffer_size, num_envs, float_dtype, num_blocks=blocks)
+
+    # Shapes first, real arrays after: everything compiles before the scenario stream fills its shuffle buffer
+    # and before the replay buffer exists (XLA takes ~1.4 GB to compile the paper's chunk, freed after).
+    pool_abstract = pool_shapes(data_config, loop.pool_size)
+    env_abstract = jax.eval_shape(lambda pool: reset(pool, num_envs, env_key), pool_abstract)
+    carry_abstract = jax.eval_shape(fresh_carry, pool_abstract)
+    example = None
+    if config.algo in OFF_POLICY:
+        shapes = jax.eval_shape(lambda s, pool: transition_of(env.step(s, jnp.zeros((num_envs, env.action_dim)),
+                                                                       pool)[1]), env_abstract, pool_abstract)
+        example = jax.tree.map(lambda a: jnp.zeros(a.shape[1:], a.dtype), shapes)  # one unbatched transition
+        carry_abstract = carry_abstract.replace(buffer=jax.eval_shape(fresh_replay))
+    # the jitted chunk is cached per configuration: a resumed or repeated run in one process reuses it
+    learner_shapes = jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype), carry_abstract.learner)
+    chunk_fn = _chunk_function(config, learner, env, (learner_shapes, example))
+    if mesh is None:  # with several devices the shardings exist only once placed: compiled at the first call
+        release_freed_memory()
+        chunk_fn.lower(carry_abstract, pool_abstract).compile()  # the largest first; fills the jit's cache
+        release_freed_memory()
+        reset.lower(pool_abstract, num_envs, env_key).compile()
+        init.lower(learner_key, env_abstract.observation).compile()
+    if compile_also is not None:
+        compile_also(carry_abstract.learner)
+    release_freed_memory()
+
     if consumed is not None:
         pool, stream = rebuild_pool(data_config, consumed, loop.pool_size)
     else:
         stream = ScenarioStream(data_config)
         pool = initial_pool(stream, loop.pool_size)
-    # jitted: run eagerly, reset and init leave ~1 GB of freed-but-kept host memory behind
-    env_state = jax.jit(env.reset, static_argnums=1)(pool, num_envs, env_key)
-    learner_state = jax.jit(learner.init)(learner_key, env_state.observation)
-    buffer, example, buffer_mib = None, None, 0.0
-    float_dtype = _float_dtype(loop.buffer_dtype)
-    if config.algo in OFF_POLICY:
-        shapes = jax.eval_shape(
-            lambda s: transition_of(env.step(s, jnp.zeros((num_envs, env.action_dim)), pool)[1]), env_state)
-        example = jax.tree.map(lambda a: jnp.zeros(a.shape[1:], a.dtype), shapes)  # one unbatched transition
-        per_transition = transition_bytes(example, float_dtype)
-        buffer_mib = algo_config.buffer_size * per_transition / 2**20
-        print_fn(f"replay buffer: {algo_config.buffer_size:,} transitions x {per_transition:,} B = "
-                 f"{buffer_mib:,.0f} MiB ({loop.buffer_dtype} observations)")
-        buffer = buffer_init(example, algo_config.buffer_size, float_dtype, num_blocks=mesh.size if mesh else 1)
-    carry = TrainCarry(learner=learner_state, env=env_state, buffer=buffer, key=loop_key,
-                       env_steps=jnp.zeros((), jnp.int32))
-    carry = jax.tree.map(lambda a: jnp.array(a, copy=True), carry)  # distinct buffers: the chunk donates them
+    carry = fresh_carry(pool)
+    release_freed_memory()  # the host copies of the pool's scenarios
+    buffer_mib = 0.0
+    if example is not None:
+        total = replay_bytes(example, algo_config.buffer_size, num_envs, float_dtype, num_blocks=blocks)
+        buffer_mib = total / 2**20
+        print_fn(f"replay buffer: {algo_config.buffer_size:,} transitions x {total / algo_config.buffer_size:,.0f} B "
+                 f"= {buffer_mib:,.0f} MiB ({loop.buffer_dtype} observations, each stored once)")
+        carry = carry.replace(buffer=fresh_replay())
     if mesh is not None:
         carry, pool = shard_carry(carry, pool, mesh)
         print_fn(f"data-parallel over {mesh.size} devices ({num_envs // mesh.size} envs each)")
-    # the jitted chunk is cached per configuration: a resumed or repeated run in one process reuses it
-    shapes = jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype), (learner_state, example))
-    chunk_fn = _chunk_function(config, learner, env, shapes)
     return TrainingSetup(env=env, learner=learner, carry=carry, pool=pool, stream=stream, chunk_fn=chunk_fn,
-                         per_chunk=env_steps_per_chunk(config.algo, algo_config, loop.chunk_steps), mesh=mesh,
+                         per_chunk=env_steps_per_chunk(config.algo, algo_config, chunk_steps(config)), mesh=mesh,
                          buffer_mib=buffer_mib)
 
 
@@ -312,28 +345,32 @@ def train(config: TrainConfig, run_dir: str | Path, *, resume: bool = False, pro
     restored_step = store.latest_step() if resume else None
     host = store.host_state(restored_step) if restored_step is not None else {"consumed": 0, "wall_s": 0.0,
                                                                                 "chunks": 0}
-    setup = setup_training(config, train_path, print_fn, consumed=host["consumed"] if restored_step else None)
+    evaluator = _Evaluator(config, eval_path, run_dir, print_fn)
+    # evaluations during training compile the evaluation early, while memory is low (once the replay buffer and
+    # the data stream are there, its ~0.4 GB compilation set the run's peak); the final one runs without them
+    periodic = bool(loop.eval_every) and loop.eval_every < loop.total_env_steps
+    setup = setup_training(config, train_path, print_fn, consumed=host["consumed"] if restored_step else None,
+                           compile_also=evaluator.compile if periodic else None)
     try:
         return _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, restored_step, host,
-                    setup, eval_path)
+                    setup, evaluator)
     finally:
         setup.stream.close()
 
 
 def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, restored_step, host, setup,
-         eval_path) -> TrainResult:
+         evaluator: _Evaluator) -> TrainResult:
     loop = config.train
     carry, pool, stream, chunk_fn, per_chunk = setup.carry, setup.pool, setup.stream, setup.chunk_fn, setup.per_chunk
     learner = setup.learner
     if restored_step is not None:
-        carry = store.restore(restored_step, carry, with_buffer=loop.save_buffer)
-        carry = jax.tree.map(lambda a: jnp.array(a, copy=True), carry)
+        carry = store.restore(restored_step, carry, with_buffer=loop.save_buffer)  # the replay is filled in place
+        carry = jax.tree.map(lambda a: jnp.array(a, copy=True), carry.replace(buffer=None)).replace(buffer=carry.buffer)
         if setup.mesh is not None:
             carry, pool = shard_carry(carry, pool, setup.mesh)
         print_fn(f"resumed {run_dir} at {restored_step:,} env steps")
 
     logger = RunLogger(run_dir)
-    evaluator = _Evaluator(config, eval_path, run_dir, print_fn)
     env_steps = int(carry.env_steps)
     if resume:
         logger.truncate_after(env_steps)
@@ -344,12 +381,13 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
     last_checkpoint = env_steps
     last_eval = env_steps if env_steps > 0 else 0
     chunks = 0
+    warned_lost = False
     try:
         while env_steps < loop.total_env_steps:
             tick = time.perf_counter()
             carry, stats = chunk_fn(carry, pool)
             scalars = _host_scalars(stats)  # blocks until the chunk is done
-            pool = refresh_pool(pool, stream, loop.pool_refresh)
+            pool = refresh_pool(pool, stream, pool_refresh(config))
             env_steps = int(carry.env_steps)
             elapsed = time.perf_counter() - tick
             scalars.update({"sps": per_chunk / elapsed, "wall_s": wall_before + time.perf_counter() - start,
@@ -359,13 +397,23 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
             bar.update(per_chunk, env_steps, {"sps": f"{scalars['sps']:.0f}",
                                               "return": f"{scalars.get('episode/return', math.nan):.2f}",
                                               "acc": f"{scalars.get('episode/accuracy', math.nan):.2f}"})
+            if not warned_lost and carry.buffer is not None and (lost := lost_last_observations(carry.buffer)):
+                warned_lost = True
+                print_fn(f"warning: {lost:,} truncated transitions in the replay buffer lost their last observation "
+                         f"(truncated episodes average under {MIN_TRUNCATED_LENGTH} steps); their targets bootstrap "
+                         f"from the next episode's first observation")
+            # evaluations and checkpoints free a lot at once: return it (and what the chunks left) to the system
             if loop.eval_every and env_steps - last_eval >= loop.eval_every and env_steps < loop.total_env_steps:
+                release_freed_memory()
                 evaluator.run(learner.policy_params(carry.learner), env_steps, scalars["wall_s"])
                 last_eval = env_steps
+                release_freed_memory()
             if env_steps - last_checkpoint >= loop.checkpoint_every or env_steps >= loop.total_env_steps:
+                release_freed_memory()
                 store.save(env_steps, carry, {"consumed": stream.consumed, "wall_s": scalars["wall_s"],
                                               "chunks": int(host["chunks"]) + chunks}, with_buffer=loop.save_buffer)
                 last_checkpoint = env_steps
+                release_freed_memory()
             if stop_after_chunks is not None and chunks >= stop_after_chunks:
                 break
     finally:
@@ -375,6 +423,8 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
     wall_s = wall_before + time.perf_counter() - start
     finished = env_steps >= loop.total_env_steps
     final = None
+    carry, pool = carry.replace(buffer=None), None  # done with (the last checkpoint holds the buffer): evaluate without
+    release_freed_memory()
     if finished:
         final = evaluator.run(learner.policy_params(carry.learner), env_steps, wall_s)
         evaluator.plot(run_dir / "learning_curve.png", logger.rows)
@@ -391,8 +441,9 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
 
 
 class _Evaluator:
-    """Held-out evaluation of the current policy with `vmax_sim.evaluation.evaluate` (scenarios
-    converted once, one compilation for every evaluation of the run)."""
+    """Held-out evaluation of the current policy with `vmax_sim.evaluation.evaluate` (one compilation for every
+    evaluation of the run). The scenarios are converted again at each evaluation, one batch at a time: holding
+    all of them converted (~190 MB for 100) for the whole run cost more memory than the seconds it saved."""
 
     def __init__(self, config: TrainConfig, eval_path: str, run_dir: Path, print_fn):
         self.config = config
@@ -401,21 +452,28 @@ class _Evaluator:
         self.env_config = components(config)[0].env_config
         self.log = RunLogger(run_dir, tensorboard=False, file_name="eval.csv")
         self.print_fn = print_fn
-        self._prepared = None
 
     def truncate_after(self, env_steps: int) -> None:
         self.log.truncate_after(env_steps)
+
+    def compile(self, learner_shapes) -> None:
+        """Compiles the evaluation: one batch with zero parameters of the learner's shapes, results dropped."""
+        from vmax_sim.evaluation.evaluate import evaluate
+
+        params = jax.eval_shape(components(self.config)[1].policy_params, learner_shapes)
+        evaluate(self.policy, self.data, data_config=self.data, env_config=self.env_config, obs_config=self.config.obs,
+                 num_scenarios=self.data.batch_size, policy_params=jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype),
+                                                                                 params))
 
     def rows(self) -> list[dict]:
         return self.log.rows
 
     def run(self, params, env_steps: int, wall_s: float) -> dict:
-        from vmax_sim.evaluation.evaluate import evaluate, prepare_batches
+        from vmax_sim.evaluation.evaluate import evaluate
 
-        if self._prepared is None:
-            self._prepared = prepare_batches(self.data, self.config.train.eval_scenarios)
-        result = evaluate(self.policy, self._prepared, data_config=self.data, env_config=self.env_config,
-                          obs_config=self.config.obs, policy_params=params)
+        result = evaluate(self.policy, self.data, data_config=self.data, env_config=self.env_config,
+                          obs_config=self.config.obs, num_scenarios=self.config.train.eval_scenarios,
+                          policy_params=params)
         summary = result.summary
         row = {"wall_s": float(wall_s), "accuracy": summary["accuracy"],
                "vmax_score": summary["vmax_score"], "nuplan_score": summary["nuplan_score"],
