@@ -22,9 +22,9 @@ CONFIGS = [  # (preset, overrides); a PPO chunk step is a whole update (10,240 e
     ("sac-lqh", []),
     ("sac-wayformer", []),
     ("sac-mtr", []),
-    ("ppo-lq", ["train.chunk_steps=1"]),
-    ("ppo-mlp", ["train.chunk_steps=1"]),
-    ("ppo-none", ["train.chunk_steps=1"]),
+    ("ppo-lq", []),  # one update per chunk (the default train.chunk_steps for ppo)
+    ("ppo-mlp", []),
+    ("ppo-none", []),
     ("bc-mlp", []),
     ("bc_sac-lq", []),
 ]

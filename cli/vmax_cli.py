@@ -8,7 +8,9 @@ from pathlib import Path
 
 import click
 
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError, one_line
+
+VIEW_DEFAULT = "rollouts.html"  # `vmax-sim evaluate --view` with no file name
 
 
 def _fail(message: str) -> None:
@@ -27,27 +29,53 @@ def _int_list(text: str) -> tuple[int, ...]:
     return values
 
 
-@click.group()
+# What `pip install 'vmax[sim]'` adds (top-level import names); the base install is scenariomax alone.
+SIM_EXTRA_MODULES = frozenset({"jax", "jaxlib", "flax", "optax", "orbax", "tensorboardX", "PIL"})
+
+
+class _NeedsSimExtra(click.Group):
+    """Without the `sim` extra a command ends in one line saying what to install, not in an ImportError traceback."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except ModuleNotFoundError as error:
+            missing = (error.name or "").split(".")[0]
+            if missing not in SIM_EXTRA_MODULES:
+                raise
+            _fail(f"vmax-sim needs the simulator extra ({missing} is not installed): pip install 'vmax[sim]'")
+
+
+@click.group(cls=_NeedsSimExtra)
 def main() -> None:
     """V-Max simulator: train and evaluate policies, benchmark, run the demo."""
 
 
 @main.command()
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON.")
-@click.option("--batch-sizes", default="1,32,256", show_default=True, help="Comma-separated batch sizes.")
+@click.option("--batch-sizes", default="1,32,256,1024,4096", show_default=True,
+              help="Comma-separated batch sizes. From 1024 on, each configuration gets 1 warm-up and 3 timed runs "
+                   "(seconds each on a CPU); a batch whose states do not fit in free memory is skipped with a note.")
 @click.option("--steps", type=click.IntRange(1), default=80, show_default=True, help="Steps per timed rollout.")
 @click.option("--quick", is_flag=True, help="Small run: batch 1 and 8, 20 steps, roadgraph 5k and 30k.")
 @click.option("--env", "env_kind", type=click.Choice(["real", "minimal", "both"]), default="real", show_default=True,
               help="Time the real Environment.step, the minimal array step, or both.")
-def bench(as_json, batch_sizes, steps, quick, env_kind):
-    """Scene-steps per second of the simulator step (env, +observation, +metrics)."""
+@click.option("--compare-waymax", metavar="PYTHON", default=None,
+              help="Also time Waymax's physics step on the same scenes with this Python interpreter (one that has "
+                   "Waymax installed, e.g. ~/waymax-venv/bin/python) and print the ratios ours / Waymax.")
+def bench(as_json, batch_sizes, steps, quick, env_kind, compare_waymax):
+    """Scene-steps per second of the simulator step (env, +observation, +metrics) and memory per scene."""
     from vmax_sim.bench import run_bench
 
     sizes = _int_list(batch_sizes)
-    kwargs = {"batch_sizes": sizes, "steps": steps, "json": as_json, "env_kinds": _env_kinds(env_kind)}
+    kwargs = {"batch_sizes": sizes, "steps": steps, "json": as_json, "env_kinds": _env_kinds(env_kind),
+              "compare_waymax": compare_waymax}
     if quick:
         kwargs.update(batch_sizes=(1, 8), steps=min(steps, 20), roadgraph_sizes=(5000, 30000))
-    run_bench(**kwargs)
+    try:
+        run_bench(**kwargs)
+    except (ValueError, OSError) as error:
+        _fail(one_line(error))
 
 
 def _env_kinds(choice: str) -> tuple[str, ...]:
@@ -86,7 +114,7 @@ def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
             click.echo(f"run directory: {run_dir}")
             result = run_training(config, run_dir, progress=not quiet, print_fn=click.echo)
     except (InputError, ValueError, OSError) as error:
-        _fail(str(error).splitlines()[0] if str(error) else type(error).__name__)
+        _fail(one_line(error))
     click.echo(f"trained {result.env_steps:,} env steps in {result.wall_s / 60:.1f} min "
                f"({result.env_steps_per_s:,.0f} env steps/s); run directory {result.run_dir}")
     if result.final_evaluation:
@@ -102,7 +130,8 @@ def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
 @click.option("--data", default=None, help="Shard directory, file or glob (default for a run: its held-out split).")
 @click.option("--mode", default="non_reactive", show_default=True,
               help="Evaluation mode: non_reactive (others replay the log), reactive (controllable agents driven "
-                   "along their paths), perturbed (the SDC starts off its log). See docs/evaluation.md.")
+                   "along their paths), perturbed (the SDC starts off its log), adversarial (one vehicle re-planned "
+                   "to cut in on the SDC). See docs/evaluation-modes.md.")
 @click.option("--agents", default=None, help="reactive: who drives the controllable agents: idm (default), pdm, "
                                               "or same (the evaluated policy: self-play).")
 @click.option("--max-agents", type=click.IntRange(1), default=None,
@@ -129,20 +158,36 @@ def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
 @click.option("--difficulty", is_flag=True,
               help="Tag scenarios by difficulty and print accuracy and V-Max score per bucket (difficulty.csv "
                    "in an --out directory).")
+@click.option("--view", "view_file", is_flag=False, flag_value=VIEW_DEFAULT, default=None, metavar="[FILE]",
+              help="Write the rollout viewer page (failed episodes first): FILE, or rollouts.html (inside an --out "
+                   "directory when one is given).")
+@click.option("--view-max", type=click.IntRange(1), default=8, show_default=True,
+              help="Scenarios on the --view page.")
 def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, num_scenarios, num_objects, seed,
-             as_json, out, quiet, gallery_dir, gallery_max, gallery_passed, difficulty):
+             as_json, out, quiet, gallery_dir, gallery_max, gallery_passed, difficulty, view_file, view_max):
     """Closed-loop evaluation: accuracy, nuPlan and V-Max scores; several policies give one comparison table."""
     from vmax_sim.evaluation import format_summary
     from vmax_sim.evaluation.extras import EvaluationExtras
     from vmax_sim.evaluation.modes import parse_mode
-    from vmax_sim.evaluation.report import compare_policies, format_markdown, split_policies, write_report
+    from vmax_sim.evaluation.report import (
+        compare_policies,
+        format_markdown,
+        split_policies,
+        write_evaluation_settings,
+        write_report,
+    )
+    from vmax_sim.visualization.view import run_data
 
     try:
+        mode_name = mode
         mode = parse_mode(mode, agents=agents, perturb_sigma=perturb_sigma, max_agents=max_agents, seed=seed)
         entries = split_policies(policy)
-        extras = EvaluationExtras.create(gallery_dir, gallery_max, gallery_passed, difficulty)
+        out_dir = out if out and not out.endswith(".json") else None
+        if view_file == VIEW_DEFAULT and out_dir:
+            view_file = str(Path(out_dir) / VIEW_DEFAULT)
+        extras = EvaluationExtras.create(gallery_dir, gallery_max, gallery_passed, difficulty, view_file, view_max)
         runs = compare_policies(entries, data, mode, num_scenarios=num_scenarios, batch_size=batch_size,
-                                num_objects=num_objects, seed=seed, progress=not quiet and not as_json,
+                                num_objects=num_objects, seed=seed, progress=not quiet,  # on stderr: --json stays clean
                                 print_fn=lambda line: click.echo(line, err=True), on_batch=extras.on_batch)
         summaries = {run.name: run.result.summary for run in runs}
         if len(runs) == 1:
@@ -157,12 +202,19 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
         elif out:
             write_report(out, runs)
             (Path(out) / "summaries.json").write_text(json.dumps(summaries, indent=2))
+            write_evaluation_settings(out, {
+                "policies": entries, "data": data, "mode": mode_name, "agents": agents, "max_agents": max_agents,
+                "perturb_sigma": perturb_sigma, "seed": seed, "num_objects": num_objects,
+                "num_scenarios": num_scenarios})
             if not as_json:
-                click.echo(f"wrote {out}/table.md, table.csv, summaries.json and episodes-<policy>.csv")
+                click.echo(f"wrote {out}/table.md, table.csv, summaries.json, evaluation.json and "
+                           "episodes-<policy>.csv")
         extras.finish(runs, out, show_tables=not as_json, progress=not quiet and not as_json, print_fn=click.echo,
-                      note=f"data: {data or 'the held-out split of each run'}")
+                      note=f"data: {data or 'the held-out split of each run'}",
+                      data=run_data(entries, data, lambda line: click.echo(line, err=True)) if view_file else None,
+                      mode_name=mode.name)
     except (InputError, ValueError, OSError) as error:
-        _fail(str(error).splitlines()[0] if str(error) else type(error).__name__)
+        _fail(one_line(error))
 
 
 @main.command()
@@ -183,11 +235,11 @@ def demo(out, num_scenarios, num_eval_scenarios, train_steps, seed, workers):
         run_demo(out, num_scenarios=num_scenarios, num_eval_scenarios=num_eval_scenarios, seed=seed,
                  workers=workers, train_steps=train_steps, print_fn=click.echo)
     except (InputError, ValueError, OSError) as error:
-        _fail(str(error).splitlines()[0] if str(error) else type(error).__name__)
+        _fail(one_line(error))
 
 
 @main.command()
-@click.argument("target", metavar="RUN_OR_SHARDS")
+@click.argument("target", metavar="RUN_EVAL_OR_SHARDS")
 @click.option("--policy", default=None,
               help="Comma-separated policies (expert, constant, idm, pdm, random or run directories). Default: "
                    "constant,idm for shards; for a training run directory its own policy (these are added).")
@@ -200,7 +252,11 @@ def demo(out, num_scenarios, num_eval_scenarios, train_steps, seed, workers):
               help="The self-contained HTML file to write.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def view(target, policy, num_scenarios, data, num_objects, seed, out, quiet):
-    """Web viewer of closed-loop rollouts: logged and simulated SDCs, per-step metrics (docs/viewer.md)."""
+    """Web viewer of closed-loop rollouts: logged and simulated SDCs, per-step metrics (docs/viewer.md).
+
+    RUN_EVAL_OR_SHARDS: shards (the policies on their first scenarios), a training run directory (its policy on
+    its held-out split) or a `vmax-sim evaluate --out` directory (its policies and mode, failed scenarios first).
+    """
     from vmax_sim.evaluation.report import split_policies
     from vmax_sim.visualization.view import write_rollout_view
 
@@ -210,7 +266,7 @@ def view(target, policy, num_scenarios, data, num_objects, seed, out, quiet):
                                     num_objects=num_objects, seed=seed, progress=not quiet,
                                     print_fn=lambda line: click.echo(line, err=True))
     except (InputError, ValueError, OSError) as error:
-        _fail(str(error).splitlines()[0] if str(error) else type(error).__name__)
+        _fail(one_line(error))
     click.echo(f"{result.num_embedded} scenario(s); {result.size_bytes / 1e6:.1f} MB", err=True)
     click.echo(str(result.out))
 

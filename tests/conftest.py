@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -53,3 +54,15 @@ def straight_road_scenario(scenario_id: str = "toy-0", num_objects: int = 3, num
 @pytest.fixture
 def toy_scenario():
     return straight_road_scenario()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _private_cache_dir(tmp_path_factory):
+    """Tests (and the commands they start) cache map indices and synthetic splits in a folder of their own,
+    never in the user's ~/.cache/vmax_sim. A VMAX_CACHE_DIR set by the caller is kept."""
+    if "VMAX_CACHE_DIR" in os.environ:
+        yield
+        return
+    os.environ["VMAX_CACHE_DIR"] = str(tmp_path_factory.mktemp("vmax-cache"))
+    yield
+    del os.environ["VMAX_CACHE_DIR"]

@@ -1,20 +1,33 @@
 """`vmax-sim bench`: scene-steps per second of the simulator step on synthetic scenes.
 
 Scenes are random but plausible (straight multi-lane roads crossing the region, vehicles driving
-along lanes, lights, SDC paths), generated in numpy; the map index is built once per scene on the
-host. Two env steps are timed: "real" is part A's `Environment.step` on a `SimulatorState` with
-metrics and observation read through `vmax_sim.env.metrics_adapter` (the product path);
-"minimal" is a local step on plain arrays (kinematic bicycle for the SDC, log replay for everyone
-else), the lower bound. Timings run inside a jitted `lax.scan` over steps and `vmap` over the
-batch; compile time is reported separately.
+along lanes, lights, SDC paths), generated in numpy as `SimulatorState`s; the map index is built
+once per scene on the host, as the data loader builds it. What is timed is the environment training
+and evaluation step, built and stepped by their own code: the `Environment` of `make_environment`,
+reset at the start of each episode with the route reference arcs (`reference_arcs`), then per step
+`Environment.step` with the SDC's action (`sdc_action`), the step's shared queries (`step_inputs`,
+`shared_queries`), the metrics (`step_metrics`) and the SDC's observation (`sdc_observation`, which
+reuses the shared queries), each only in the configurations that include it. Timings run inside a
+jitted `lax.scan` over steps and `vmap` over the batch; compile time is reported separately.
+
+Each row also gives the device memory a scene takes (the nbytes of the batched `SimulatorState`, map index
+included, per scene; on an accelerator also the allocator's peak). A batch whose states would not fit in the
+free memory is skipped with a note rather than run out of memory. `compare_waymax` times Waymax's own step on
+the same scenes with the user's Waymax interpreter (`waymax_timing.py`, run in a subprocess) and prints the
+ratios ours / Waymax.
 """
 
 from __future__ import annotations
 
 import json as json_lib
+import os
+import subprocess
+import sys
+import tempfile
 import time
+from functools import lru_cache
+from pathlib import Path
 
-import flax.struct
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -29,7 +42,6 @@ from scenariomax.schema import (
     TL_STOP,
 )
 from vmax_sim.datatypes import (
-    Action,
     ObjectMetadata,
     Paths,
     RoadgraphPoints,
@@ -37,23 +49,29 @@ from vmax_sim.datatypes import (
     TrafficLights,
     Trajectory,
 )
-from vmax_sim.map_index import (
-    MapIndex,
-    MapIndexConfig,
-    build_map_index,
-    path_arc_length,
-    route_reference_arcs,
-)
-from vmax_sim.metrics import MetricsConfig, StepInputs, shared_queries, step_metrics
-from vmax_sim.observation import ObservationConfig, ObservationInputs, observe
+from vmax_sim.env import EnvConfig, make_environment
+from vmax_sim.env.metrics_adapter import reference_arcs, sdc_observation, step_inputs
+from vmax_sim.evaluation.policies import sdc_action
+from vmax_sim.map_index.build import build_map_index, path_arc_length
+from vmax_sim.map_index.structure import MapIndexConfig
+from vmax_sim.metrics import MetricsConfig, shared_queries, step_metrics
+from vmax_sim.observation import ObservationConfig
 
-__all__ = ["CONFIGS", "format_table", "make_real_step_fn", "make_scene", "make_step_fn", "run_bench", "scene_state",
-           "synthetic_scene"]
+__all__ = ["CONFIGS", "DEFAULT_BATCH_SIZES", "ENV_KINDS", "compare_with_waymax", "format_table", "make_episode_fns",
+           "run_bench", "scene_state", "state_bytes_per_scene", "synthetic_scene", "time_waymax", "timing_runs"]
 
 NUM_STEPS_LOG = 91
 LANE_WIDTH = 3.7
-HISTORY = 5  # observation history; the metrics use the last 3
+HISTORY = 5  # steps from the log before the policy acts (EnvConfig.init_steps); the metrics use the last 3
 MIN_MEASURE_S = 1.5  # seconds of timed runs per configuration
+DEFAULT_BATCH_SIZES = (1, 32, 256, 1024, 4096)
+LARGE_BATCH = 1024  # from here on one run takes seconds on a CPU: 1 warm-up and 3 timed runs keep the bench short
+MEMORY_HEADROOM = 2.0  # peak RSS / nbytes of the batch's states, CPU, full step: 2.4 at batch 1024, 1.4 at 4096
+WAYMAX_SCRIPT = Path(__file__).with_name("waymax_timing.py")
+BENCH_ACTION = (0.2, 0.001)  # the SDC's constant action: acceleration m/s^2, curvature 1/m
+# `--env` choices: "real" is the environment above; "minimal" named a stand-in array step that no
+# product code ran, now removed: it (and "both") time the real environment.
+ENV_KINDS = ("real", "minimal")
 
 
 # ----------------------------------------------------------------------------- synthetic scenes
@@ -129,136 +147,12 @@ def synthetic_scene(num_roadgraph: int, num_objects: int = 64, seed: int = 0) ->
                 "path_on_route": np.arange(10) < 2}
 
 
-@flax.struct.dataclass
-class BenchScene:
-    """Static per-scene arrays (log, lights, paths) plus the map index."""
-
-    map_index: MapIndex
-    obj_xy: jnp.ndarray  # (N, T, 2)
-    obj_yaw: jnp.ndarray  # (N, T)
-    obj_vel: jnp.ndarray  # (N, T, 2)
-    obj_size: jnp.ndarray  # (N, 2)
-    obj_type: jnp.ndarray  # (N,)
-    obj_valid: jnp.ndarray  # (N, T)
-    light_xy: jnp.ndarray  # (L, 2)
-    light_lane_id: jnp.ndarray  # (L,)
-    light_state: jnp.ndarray  # (L,)
-    light_valid: jnp.ndarray  # (L,)
-    path_xy: jnp.ndarray  # (P, M, 2)
-    path_valid: jnp.ndarray  # (P, M)
-    path_arc: jnp.ndarray  # (P, M)
-    path_on_route: jnp.ndarray  # (P,)
-    path_log_arc: jnp.ndarray  # (P, 2), computed once per scene
+# ----------------------------------------------------------------------------- the environment's states
 
 
-@flax.struct.dataclass
-class BenchState:
-    t: jnp.ndarray  # () int32, log step
-    sdc_xy: jnp.ndarray  # (HISTORY, 2)
-    sdc_yaw: jnp.ndarray  # (HISTORY,)
-    sdc_speed: jnp.ndarray  # ()
-    object_boxes: jnp.ndarray  # (N, 5) log-replayed boxes at t
-    object_vel: jnp.ndarray  # (N, 2) log-replayed velocities at t
-
-
-def make_scene(arrays: dict, config: MapIndexConfig | None = None) -> BenchScene:
-    """Host side: build the map index around the SDC's start and wrap the arrays."""
-    index = build_map_index(arrays["xyz"], arrays["dir"], arrays["types"], arrays["ids"], arrays["valid"],
-                            config, arrays["obj_xy"][0, HISTORY - 1], speed_limit=arrays["speed_limit"])
-    keys = [f.name for f in BenchScene.__dataclass_fields__.values() if f.name not in ("map_index", "path_log_arc")]
-    log_arc = route_reference_arcs(jnp.asarray(arrays["path_xy"]), jnp.asarray(arrays["path_valid"]),
-                                   jnp.asarray(arrays["path_arc"]), jnp.asarray(arrays["obj_xy"][0, HISTORY - 1]),
-                                   jnp.asarray(arrays["obj_xy"][0, -1]))
-    return BenchScene(map_index=index, path_log_arc=log_arc, **{k: jnp.asarray(arrays[k]) for k in keys})
-
-
-def _log_boxes(scene: BenchScene, t) -> jnp.ndarray:
-    return jnp.concatenate([scene.obj_xy[:, t], scene.obj_size, scene.obj_yaw[:, t, None]], -1)
-
-
-def initial_state(scene: BenchScene) -> BenchState:
-    t = HISTORY - 1
-    return BenchState(t=jnp.asarray(t, jnp.int32), sdc_xy=scene.obj_xy[0, :HISTORY],
-                      sdc_yaw=scene.obj_yaw[0, :HISTORY], sdc_speed=jnp.linalg.norm(scene.obj_vel[0, t]),
-                      object_boxes=_log_boxes(scene, t), object_vel=scene.obj_vel[:, t])
-
-
-def env_step(scene: BenchScene, state: BenchState, action: jnp.ndarray, dt: float = 0.1) -> BenchState:
-    """Kinematic bicycle for the SDC (action = [accel, curvature]); the log replays the rest."""
-    speed = jnp.maximum(state.sdc_speed + action[0] * dt, 0.0)
-    yaw = state.sdc_yaw[-1] + speed * action[1] * dt
-    xy = state.sdc_xy[-1] + speed * dt * jnp.stack([jnp.cos(yaw), jnp.sin(yaw)])
-    t = jnp.minimum(state.t + 1, NUM_STEPS_LOG - 1)
-    return BenchState(t=t, sdc_xy=jnp.concatenate([state.sdc_xy[1:], xy[None]]),
-                      sdc_yaw=jnp.concatenate([state.sdc_yaw[1:], yaw[None]]), sdc_speed=speed,
-                      object_boxes=_log_boxes(scene, t), object_vel=scene.obj_vel[:, t])
-
-
-def _window(x, t, axis_len=HISTORY):
-    """x (N, T, ...) -> (N, HISTORY, ...) ending at step t."""
-    start = jnp.maximum(t - axis_len + 1, 0)
-    return jax.lax.dynamic_slice_in_dim(x, start, axis_len, axis=1)
-
-
-def _object_mask(scene: BenchScene, t):
-    valid = scene.obj_valid[:, t]
-    return valid.at[0].set(False)  # the SDC's log slot is not an "other object"
-
-
-def metric_inputs(scene: BenchScene, state: BenchState) -> StepInputs:
-    t = state.t
-    return StepInputs(
-        sdc_xy=state.sdc_xy[-3:], sdc_yaw=state.sdc_yaw[-3:], sdc_size=scene.obj_size[0],
-        sdc_log_xy=scene.obj_xy[0, t], object_boxes=state.object_boxes, object_vel=state.object_vel,
-        object_valid=_object_mask(scene, t), light_xy=scene.light_xy, light_lane_id=scene.light_lane_id,
-        light_state=scene.light_state, light_valid=scene.light_valid, path_xy=scene.path_xy,
-        path_valid=scene.path_valid, path_arc=scene.path_arc, path_on_route=scene.path_on_route,
-        path_log_arc=scene.path_log_arc)
-
-
-def observation_inputs(scene: BenchScene, state: BenchState) -> ObservationInputs:
-    t = state.t
-    valid = _window(scene.obj_valid, t) & _object_mask(scene, t)[:, None]
-    sdc_vel = jnp.concatenate([jnp.diff(state.sdc_xy, axis=0)[:1], jnp.diff(state.sdc_xy, axis=0)]) / 0.1
-    return ObservationInputs(
-        sdc_xy=state.sdc_xy, sdc_yaw=state.sdc_yaw, sdc_vel=sdc_vel, sdc_valid=jnp.ones(HISTORY, bool),
-        object_xy=_window(scene.obj_xy, t), object_yaw=_window(scene.obj_yaw, t), object_vel=_window(scene.obj_vel, t),
-        object_size=scene.obj_size, object_type=scene.obj_type, object_valid=valid, light_xy=scene.light_xy,
-        light_state=scene.light_state, light_valid=scene.light_valid, path_xy=scene.path_xy,
-        path_valid=scene.path_valid, path_arc=scene.path_arc, path_on_route=scene.path_on_route)
-
-
-def make_step_fn(with_observation: bool, with_metrics: bool, metrics_config: MetricsConfig | None = None,
-                 obs_config: ObservationConfig | None = None):
-    """One scene-step: env, then (optionally) metrics and observation sharing one candidate set."""
-    metrics_config = metrics_config or MetricsConfig()
-    obs_config = obs_config or ObservationConfig()
-
-    def step(scene: BenchScene, state: BenchState, action):
-        state = env_step(scene, state, action)
-        out = jnp.sum(state.object_boxes)  # keeps the log replay alive in the env-only config
-        shared = None
-        if with_metrics:
-            inputs = metric_inputs(scene, state)
-            shared = shared_queries(inputs, metrics_config)
-            values = step_metrics(scene.map_index, inputs, metrics_config, shared)
-            out = out + sum(values.values())
-        if with_observation:
-            # the observation reuses the metrics' candidate objects and path projection
-            obs = observe(scene.map_index, observation_inputs(scene, state), obs_config,
-                          candidates=(shared.candidate_index, shared.candidate_valid) if shared else None,
-                          path_projection=shared.path_projection if shared else None)
-            out = out + jnp.sum(obs.objects) + jnp.sum(obs.roadgraph) + jnp.sum(obs.lights) + jnp.sum(obs.path_targets)
-        return state, out
-
-    return step
-
-
-# ----------------------------------------------------------------------------- the real environment
-
-
-def scene_state(arrays: dict, scene: BenchScene) -> SimulatorState:
-    """The same scene as a real `SimulatorState` at timestep HISTORY - 1 (the map index is shared)."""
+def scene_state(arrays: dict, map_index_config: MapIndexConfig | None = None) -> SimulatorState:
+    """A `synthetic_scene` as a `SimulatorState` at timestep HISTORY - 1, with its map index built on the
+    host around the SDC's position there (as the data loader centres it on the current step)."""
     num_objects, num_steps = arrays["obj_valid"].shape
     full = lambda a: np.broadcast_to(np.asarray(a, np.float32)[:, None], (num_objects, num_steps))  # noqa: E731
     log = Trajectory(
@@ -287,133 +181,212 @@ def scene_state(arrays: dict, scene: BenchScene) -> SimulatorState:
                   ids=np.full(path_xy.shape[:2], -1, np.int32), valid=arrays["path_valid"],
                   arc_length=arrays["path_arc"],
                   on_route=arrays["path_on_route"])
+    map_index = build_map_index(xyz, dirs, arrays["types"], arrays["ids"], arrays["valid"], map_index_config,
+                                arrays["obj_xy"][0, HISTORY - 1], speed_limit=arrays["speed_limit"])
     state = SimulatorState(log_trajectory=log, sim_trajectory=log, object_metadata=metadata, roadgraph_points=roadgraph,
-                           log_traffic_light=lights, sdc_paths=paths, map_index=scene.map_index,
+                           log_traffic_light=lights, sdc_paths=paths, map_index=map_index,
                            timestep=np.asarray(HISTORY - 1, np.int32))
     return jax.tree_util.tree_map(jnp.asarray, state)
 
 
-@flax.struct.dataclass
-class RealScene:
-    state: SimulatorState  # the scenario at its first policy step
-    path_log_arc: jnp.ndarray  # (P, 2), computed once per episode
+@lru_cache(maxsize=4)
+def _distinct_scenes(count: int, num_objects: int, num_roadgraph: int) -> SimulatorState:
+    """`count` different scene states stacked on a leading axis (kept: building a map index takes ~1 s)."""
+    distinct = [scene_state(synthetic_scene(num_roadgraph, num_objects, seed)) for seed in range(count)]
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *distinct)
 
 
-def make_real_step_fn(with_observation: bool, with_metrics: bool, num_objects: int = 64,
-                      metrics_config: MetricsConfig | None = None, obs_config: ObservationConfig | None = None):
-    """One scene-step of the real `Environment.step`, then (optionally) metrics and observation via the adapter."""
-    from vmax_sim.env import EnvConfig, Environment
-    from vmax_sim.env.metrics_adapter import observation_inputs, step_inputs
+def _scenes(batch: int, num_objects: int, num_roadgraph: int, num_distinct: int = 4) -> SimulatorState:
+    """`batch` states (leading axis) cycling through `num_distinct` different scenes."""
+    distinct = _distinct_scenes(min(batch, num_distinct), num_objects, num_roadgraph)
+    cycle = jnp.arange(batch) % min(batch, num_distinct)  # one gather per array, not `batch` copies to stack
+    return jax.tree_util.tree_map(lambda x: jnp.take(x, cycle, axis=0), distinct)
 
+
+# ----------------------------------------------------------------------------- the timed step
+
+
+def make_episode_fns(with_observation: bool, with_metrics: bool, num_objects: int = 64,
+                     metrics_config: MetricsConfig | None = None, obs_config: ObservationConfig | None = None):
+    """(init_fn, step_fn) of one scene's episode, as evaluation (`run_episode`) and training (`LearningEnv`)
+    run it. init_fn(state) -> (env state, route reference arcs): `Environment.reset`, then `reference_arcs`.
+    step_fn(arcs, state, action (2,)) -> (state, a scalar that keeps every computed part alive): the SDC's
+    action through `Environment.step`; with metrics or observation, the step's shared queries (candidate
+    objects, path projection); with metrics, `step_metrics`; with observation, `sdc_observation`."""
     metrics_config = metrics_config or MetricsConfig()
     obs_config = obs_config or ObservationConfig()
-    env = Environment(EnvConfig(max_num_objects=num_objects, init_steps=HISTORY))
+    env = make_environment(EnvConfig(max_num_objects=num_objects, init_steps=HISTORY), metrics_config)
 
-    def step(scene: RealScene, state: SimulatorState, action):
-        is_sdc = state.object_metadata.is_sdc
-        full_action = Action(data=jnp.where(is_sdc[:, None], action[None], 0.0), valid=is_sdc[:, None])
-        state = env.step(state, full_action)
+    def init_fn(state: SimulatorState):
+        state = env.reset(state)
+        return state, reference_arcs(state, env.config)
+
+    def step_fn(arcs, state: SimulatorState, action):
+        state = env.step(state, sdc_action(state, action))
         out = jnp.sum(state.current_sim_trajectory.x)  # keeps the log replay alive in the env-only config
-        shared = None
-        if with_metrics:
-            inputs = step_inputs(state, scene.path_log_arc)
+        if with_metrics or with_observation:
+            inputs = step_inputs(state, arcs)
             shared = shared_queries(inputs, metrics_config)
+        if with_metrics:
             values = step_metrics(state.map_index, inputs, metrics_config, shared)
             out = out + sum(values.values())
         if with_observation:
-            obs = observe(state.map_index, observation_inputs(state, obs_config.num_history), obs_config,
-                          candidates=(shared.candidate_index, shared.candidate_valid) if shared else None,
-                          path_projection=shared.path_projection if shared else None)
+            obs = sdc_observation(state, shared, obs_config)
             out = out + jnp.sum(obs.objects) + jnp.sum(obs.roadgraph) + jnp.sum(obs.lights) + jnp.sum(obs.path_targets)
         return state, out
 
-    return step
+    return init_fn, step_fn
 
 
-def _real_scenes(batch: int, num_objects: int, num_roadgraph: int, num_distinct: int = 4) -> RealScene:
-    distinct = []
-    for seed in range(min(batch, num_distinct)):
-        arrays = synthetic_scene(num_roadgraph, num_objects, seed)
-        scene = make_scene(arrays)
-        distinct.append(RealScene(state=scene_state(arrays, scene), path_log_arc=scene.path_log_arc))
-    return jax.tree_util.tree_map(lambda *xs: jnp.stack([xs[i % len(xs)] for i in range(batch)]), *distinct)
+def timing_runs(batch: int) -> dict:
+    """How a batch is timed: `warmups` untimed runs, then at least `repeats` runs and `min_seconds` of them."""
+    if batch >= LARGE_BATCH:
+        return {"warmups": 1, "repeats": 3, "min_seconds": 0.0}
+    return {"warmups": 3, "repeats": 5, "min_seconds": MIN_MEASURE_S}
 
 
-def _time_config(scenes, step_fn, steps: int, repeats: int = 5, init_fn=None) -> tuple[float, float]:
-    """(compile seconds, best scene-steps/s) of `steps` steps of a batch in one jitted program.
+def _time_config(scenes: SimulatorState, init_fn, step_fn, steps: int) -> dict:
+    """{compile_s, runs, best and median scene-steps/s} of `steps` steps of a batch in one jitted program.
 
     Like evaluation and training rollouts, each scene's episode (init + `lax.scan` over steps) is vmapped
     over the batch. The episode starts inside the vmapped function, so the timestep is a shared scalar
     (all scenes step in lockstep) and trajectory reads/writes are slices, not gathers/scatters.
     """
-    action = jnp.asarray([0.2, 0.001], jnp.float32)
-    init_fn = init_fn or initial_state
+    action = jnp.asarray(BENCH_ACTION, jnp.float32)
 
     def episode(scene):
+        state, arcs = init_fn(scene)
+
         def body(state, _):
-            state, out = step_fn(scene, state, action)
+            state, out = step_fn(arcs, state, action)
             return state, out
-        _, outs = jax.lax.scan(body, init_fn(scene), None, length=steps)
+        _, outs = jax.lax.scan(body, state, None, length=steps)
         return jnp.sum(outs)
 
     rollout = jax.jit(jax.vmap(episode))
     batch = jax.tree_util.tree_leaves(scenes)[0].shape[0]
+    runs = timing_runs(batch)
     start = time.perf_counter()
     compiled = rollout.lower(scenes).compile()
     compile_s = time.perf_counter() - start
-    for _ in range(3):  # warm-up: the first runs in a process pay for thread pools and page faults
+    for _ in range(runs["warmups"]):  # the first runs in a process pay for thread pools and page faults
         jax.block_until_ready(compiled(scenes))
-    # Best of at least `repeats` runs and at least MIN_MEASURE_S of measuring: a shared or virtual
-    # machine has bursts of contention, and the best run is the one that reflects the code.
-    best, measured, runs = np.inf, 0.0, 0
-    while runs < repeats or measured < MIN_MEASURE_S:
+    # Best of at least `repeats` runs and at least `min_seconds` of measuring: a shared or virtual machine has
+    # bursts of contention, and the best run is the one that reflects the code (the median is for comparisons).
+    times: list[float] = []
+    while len(times) < runs["repeats"] or sum(times) < runs["min_seconds"]:
         start = time.perf_counter()
         jax.block_until_ready(compiled(scenes))
-        elapsed = time.perf_counter() - start
-        best, measured, runs = min(best, elapsed), measured + elapsed, runs + 1
-    return compile_s, batch * steps / best
+        times.append(time.perf_counter() - start)
+    return {"compile_s": compile_s, "runs": len(times), "best_sps": batch * steps / min(times),
+            "median_sps": batch * steps / float(np.median(times))}
 
 
-def _batched_scenes(batch: int, num_objects: int, num_roadgraph: int, num_distinct: int = 4) -> BenchScene:
-    distinct = [make_scene(synthetic_scene(num_roadgraph, num_objects, seed))
-                for seed in range(min(batch, num_distinct))]
-    return jax.tree_util.tree_map(lambda *xs: jnp.stack([xs[i % len(xs)] for i in range(batch)]), *distinct)
+def state_bytes_per_scene(scenes: SimulatorState) -> dict:
+    """Device bytes one scene of a batch takes: the whole state (map index included) and its map index."""
+    batch = jax.tree_util.tree_leaves(scenes)[0].shape[0]
+    nbytes = lambda tree: sum(leaf.nbytes for leaf in jax.tree_util.tree_leaves(tree))  # noqa: E731
+    return {"bytes_per_scene": round(nbytes(scenes) / batch), "map_index_bytes_per_scene":
+            round(nbytes(scenes.map_index) / batch)}
+
+
+def _device_peak_bytes() -> int | None:
+    """The allocator's peak bytes in use so far in this process (accelerators; None where not reported)."""
+    stats = jax.devices()[0].memory_stats() or {}
+    return stats.get("peak_bytes_in_use")
+
+
+def _available_bytes() -> int | None:
+    """Free memory for a batch: the allocator's limit minus use on an accelerator, MemAvailable on a CPU.
+    (waymax_timing.py has its own copy: it runs without vmax_sim.)"""
+    stats = jax.devices()[0].memory_stats() or {}
+    if "bytes_limit" in stats:
+        return int(stats["bytes_limit"]) - int(stats.get("bytes_in_use", 0))
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+@lru_cache(maxsize=8)
+def _scene_bytes(num_objects: int, num_roadgraph: int) -> int:
+    """nbytes of one scene's state, built as the bench builds them (before building a whole batch)."""
+    state = scene_state(synthetic_scene(num_roadgraph, num_objects, 0))
+    return sum(leaf.nbytes for leaf in jax.tree_util.tree_leaves(state))
+
+
+def _does_not_fit(batch: int, num_objects: int, num_roadgraph: int) -> str | None:
+    """Why a batch would run the device out of memory, or None when it fits (or free memory is unknown)."""
+    available = _available_bytes()
+    needed = MEMORY_HEADROOM * batch * _scene_bytes(num_objects, num_roadgraph)
+    if available is None or needed <= available:
+        return None
+    return f"needs ~{needed / 1e9:.1f} GB, {available / 1e9:.1f} GB free"
 
 
 CONFIGS = {"env": (False, False), "env+obs": (True, False), "env+metrics": (False, True),
            "env+metrics+obs": (True, True)}
 
 
-def _timed(kind: str, batch: int, num_objects: int, roadgraph: int, config: str, steps: int) -> dict:
+def _timed(batch: int, num_objects: int, roadgraph: int, config: str, steps: int) -> dict:
     with_obs, with_metrics = CONFIGS[config]
-    if kind == "real":
-        scenes = _real_scenes(batch, num_objects, roadgraph)
-        compile_s, sps = _time_config(scenes, make_real_step_fn(with_obs, with_metrics, num_objects), steps,
-                                      init_fn=lambda scene: scene.state.replace(timestep=jnp.int32(HISTORY - 1)))
-    else:
-        scenes = _batched_scenes(batch, num_objects, roadgraph)
-        compile_s, sps = _time_config(scenes, make_step_fn(with_obs, with_metrics), steps)
-    return {"env": kind, "config": config, "batch": batch, "roadgraph": roadgraph,
-            "compile_s": round(compile_s, 2), "scene_steps_per_s": round(sps)}
+    init_fn, step_fn = make_episode_fns(with_obs, with_metrics, num_objects)
+    scenes = _scenes(batch, num_objects, roadgraph)
+    timing = _time_config(scenes, init_fn, step_fn, steps)
+    row = {"env": "real", "config": config, "batch": batch, "roadgraph": roadgraph,
+           "compile_s": round(timing["compile_s"], 2), "scene_steps_per_s": round(timing["best_sps"]),
+           "median_scene_steps_per_s": round(timing["median_sps"]), "runs": timing["runs"],
+           **state_bytes_per_scene(scenes)}
+    peak = _device_peak_bytes()
+    if peak is not None:
+        row["device_peak_bytes"] = int(peak)
+    return row
 
 
-def run_bench(batch_sizes=(1, 32, 256), num_objects: int = 64, roadgraph_sizes=(5000, 15000, 30000),
-              steps: int = 80, json: bool = False, configs=tuple(CONFIGS), env_kinds=("real",)) -> dict:
+def _check_env_kinds(env_kinds) -> None:
+    """Every `--env` choice times the real environment; say so when the retired stand-in is asked for."""
+    unknown = sorted(set(env_kinds) - set(ENV_KINDS))
+    if unknown:
+        raise ValueError(f"unknown env kind(s) {', '.join(unknown)}; choose among {', '.join(ENV_KINDS)}")
+    if "minimal" in env_kinds:
+        print("note: the minimal array step was removed; timing the real environment only", file=sys.stderr)
+
+
+def run_bench(batch_sizes=DEFAULT_BATCH_SIZES, num_objects: int = 64, roadgraph_sizes=(5000, 15000, 30000),
+              steps: int = 80, json: bool = False, configs=tuple(CONFIGS), env_kinds=("real",),
+              compare_waymax: str | None = None) -> dict:
     """Time every configuration at each batch size (largest roadgraph), then the full step at
-    each roadgraph size (batch 32 or the nearest given), for each env kind ("real": part A's
-    Environment.step via the metrics adapter; "minimal": the local array step). Prints a table
-    (or JSON) and returns {"device", "configs": [...], "roadgraph_scaling": [...]}."""
-    device = f"{jax.devices()[0].platform}:{jax.devices()[0].device_kind}"
-    results = {"device": device, "num_objects": num_objects, "steps": steps, "configs": [], "roadgraph_scaling": []}
+    each roadgraph size (batch 32 or the nearest given). A batch whose states would not fit in free memory is
+    skipped (listed under "skipped"). env_kinds: kept for `--env`; every kind times the real environment (see
+    ENV_KINDS). compare_waymax: path of a Python interpreter with Waymax installed; its physics step is timed
+    on the same scenes first (before this process takes the device's memory). Prints a table (or JSON) and
+    returns {"device", "configs": [...], "roadgraph_scaling": [...], "skipped": [...], "waymax": {...}}.
+    Raises ValueError (one line) when the Waymax interpreter cannot be run or has no Waymax."""
+    _check_env_kinds(env_kinds)
     biggest = max(roadgraph_sizes)
-    for kind in env_kinds:
-        for batch in batch_sizes:
-            for name in configs:
-                results["configs"].append(_timed(kind, batch, num_objects, biggest, name, steps))
-        scaling_batch = min(batch_sizes, key=lambda b: abs(b - 32))
-        for size in roadgraph_sizes:
-            results["roadgraph_scaling"].append(
-                _timed(kind, scaling_batch, num_objects, size, "env+metrics+obs", steps))
+    waymax = time_waymax(compare_waymax, batch_sizes, num_objects, biggest, steps) if compare_waymax else None
+    device = f"{jax.devices()[0].platform}:{jax.devices()[0].device_kind}"
+    results = {"device": device, "num_objects": num_objects, "steps": steps, "configs": [], "roadgraph_scaling": [],
+               "skipped": []}
+    for batch in batch_sizes:
+        reason = _does_not_fit(batch, num_objects, biggest)
+        if reason:
+            results["skipped"].append({"batch": batch, "reason": reason})
+            continue
+        for name in configs:
+            results["configs"].append(_timed(batch, num_objects, biggest, name, steps))
+    timed_batches = sorted({row["batch"] for row in results["configs"]}) or list(batch_sizes)
+    scaling_batch = min(timed_batches, key=lambda b: abs(b - 32))
+    timed = {(row["batch"], row["roadgraph"], row["config"]): row for row in results["configs"]}
+    for size in roadgraph_sizes:  # the largest size's full step at this batch was timed above: reuse that row
+        row = timed.get((scaling_batch, size, "env+metrics+obs"))
+        results["roadgraph_scaling"].append(row or _timed(scaling_batch, num_objects, size, "env+metrics+obs", steps))
+    if waymax is not None:
+        results["waymax"] = compare_with_waymax(waymax, results["configs"])
     if json:
         print(json_lib.dumps(results, indent=2))
     else:
@@ -421,10 +394,124 @@ def run_bench(batch_sizes=(1, 32, 256), num_objects: int = 64, roadgraph_sizes=(
     return results
 
 
+# ----------------------------------------------------------------------------- Waymax side by side
+
+
+def _waymax_request(batch_sizes, num_objects: int, steps: int) -> dict:
+    """What waymax_timing.py runs: the bench's episode (init steps, action, steps) and timing policy per batch."""
+    return {"num_objects": num_objects, "steps": steps, "init_steps": HISTORY, "action": list(BENCH_ACTION),
+            "runs": [{"batch": batch, **timing_runs(batch)} for batch in batch_sizes]}
+
+
+def _write_scenes(path: Path, count: int, num_objects: int, num_roadgraph: int) -> None:
+    """The bench's synthetic scenes (seeds 0..count-1, as `_scenes` cycles them) as `<seed>/<field>` arrays."""
+    arrays = {f"{seed}/{name}": value for seed in range(count)
+              for name, value in synthetic_scene(num_roadgraph, num_objects, seed).items()}
+    np.savez(path, **arrays)
+
+
+def _check_interpreter(python: str) -> None:
+    path = Path(python)
+    hint = "give --compare-waymax the path of a Python interpreter with Waymax installed, e.g. ~/waymax-venv/bin/python"
+    if not path.exists():
+        raise ValueError(f"{python}: no such file; {hint}")
+    if path.is_dir() or not os.access(path, os.X_OK):
+        raise ValueError(f"{python}: not an executable file; {hint}")
+
+
+def time_waymax(python: str, batch_sizes, num_objects: int, num_roadgraph: int, steps: int) -> dict:
+    """Time Waymax's physics step on the bench's scenes with the interpreter `python` (waymax_timing.py in a
+    subprocess). Returns the script's JSON ({"waymax", "jax", "device", "rows", "skipped"}) plus "python".
+    Raises ValueError, one line naming the interpreter, when it cannot run or its environment lacks Waymax."""
+    _check_interpreter(python)
+    print(f"timing Waymax's step with {python} (batch {', '.join(map(str, batch_sizes))}) ...", file=sys.stderr)
+    with tempfile.TemporaryDirectory(prefix="vmax-bench-") as folder:
+        scenes = Path(folder) / "scenes.npz"
+        _write_scenes(scenes, min(max(batch_sizes), 4), num_objects, num_roadgraph)
+        request = json_lib.dumps(_waymax_request(batch_sizes, num_objects, steps))
+        env = {**os.environ, "TF_CPP_MIN_LOG_LEVEL": "3"}  # Waymax imports TensorFlow: keep its banner quiet
+        try:
+            done = subprocess.run([python, str(WAYMAX_SCRIPT), str(scenes), request], capture_output=True, text=True,
+                                  env=env, check=False)
+        except OSError as error:
+            raise ValueError(f"{python}: cannot run it ({error.strerror or error}); it must be a Python "
+                             "interpreter with Waymax installed") from None
+    reply = _last_json_line(done.stdout)
+    if reply is None:
+        last = (done.stderr.strip().splitlines() or [f"exit status {done.returncode}, no output"])[-1]
+        raise ValueError(f"{python}: the Waymax timing script failed: {last}")
+    if "error" in reply:
+        raise ValueError(f"{python}: {reply['error']}; install Waymax into that environment from its source "
+                         "(github.com/waymo-research/waymax; the PyPI package named 'waymax' is another project)")
+    return {"python": python, **reply}
+
+
+def _last_json_line(text: str) -> dict | None:
+    for line in reversed(text.strip().splitlines()):
+        try:
+            value = json_lib.loads(line)
+        except ValueError:
+            continue
+        return value if isinstance(value, dict) else None
+    return None
+
+
+def compare_with_waymax(waymax: dict, rows: list[dict]) -> dict:
+    """Median scene-steps/s side by side at each batch both timed: ours / Waymax for the physics-only step
+    ("env"), and our full step (env + metrics + observation) over Waymax's physics step."""
+    ours = {(row["batch"], row["config"]): row.get("median_scene_steps_per_s") for row in rows}
+    compared = []
+    for row in waymax.get("rows", []):
+        theirs = row["median_scene_steps_per_s"]
+        physics, full = ours.get((row["batch"], "env")), ours.get((row["batch"], "env+metrics+obs"))
+        compared.append({"batch": row["batch"], "waymax_physics": theirs, "ours_physics": physics,
+                         "physics_ratio": round(physics / theirs, 3) if physics and theirs else None,
+                         "ours_full": full, "full_over_waymax_physics": round(full / theirs, 3) if full and theirs
+                         else None, "waymax_bytes_per_scene": row.get("bytes_per_scene")})
+    return {key: waymax.get(key) for key in ("python", "waymax", "jax", "device")} | {
+        "rows": compared, "skipped": waymax.get("skipped", [])}
+
+
 def format_table(results: dict) -> str:
+    rows = results["configs"] + results["roadgraph_scaling"]
+    with_peak = any("device_peak_bytes" in row for row in rows)
     lines = [f"device: {results['device']}  objects: {results['num_objects']}  steps: {results['steps']}",
-             f"{'env':<9}{'config':<18}{'batch':>6}{'roadgraph':>10}{'compile s':>10}{'scene-steps/s':>15}"]
-    for row in results["configs"] + results["roadgraph_scaling"]:
-        lines.append(f"{row.get('env', 'minimal'):<9}{row['config']:<18}{row['batch']:>6}{row['roadgraph']:>10}"
-                     f"{row['compile_s']:>10}{row['scene_steps_per_s']:>15,}")
+             f"{'env':<9}{'config':<18}{'batch':>6}{'roadgraph':>10}{'compile s':>10}{'scene-steps/s':>15}"
+             f"{'median':>10}{'MB/scene':>10}" + (f"{'peak MB':>10}" if with_peak else "")]
+    for row in rows:
+        line = (f"{row.get('env', 'minimal'):<9}{row['config']:<18}{row['batch']:>6}{row['roadgraph']:>10}"
+                f"{row['compile_s']:>10}{row['scene_steps_per_s']:>15,}"
+                f"{_cell(row.get('median_scene_steps_per_s'), '{:,}'):>10}"
+                f"{_cell(row.get('bytes_per_scene'), '{:.2f}', 1e-6):>10}")
+        if with_peak:
+            line += f"{_cell(row.get('device_peak_bytes'), '{:,.0f}', 1e-6):>10}"
+        lines.append(line)
+    index_bytes = sorted({row["map_index_bytes_per_scene"] for row in rows if "map_index_bytes_per_scene" in row})
+    if index_bytes:  # one value per roadgraph size at most; the map index's shapes do not depend on it
+        lines.append(f"map index bytes per scene: {', '.join(f'{b:,}' for b in index_bytes)}")
+    lines += [f"skipped batch {skip['batch']}: {skip['reason']}" for skip in results.get("skipped", [])]
+    if "waymax" in results:
+        lines += ["", *format_waymax(results["waymax"], results["device"])]
     return "\n".join(lines)
+
+
+def _cell(value, pattern: str, scale: float = 1.0) -> str:
+    """A table cell: `value * scale` formatted with `pattern`, or "-" when the value is missing."""
+    return "-" if value is None else pattern.format(value * scale if scale != 1.0 else value)
+
+
+def format_waymax(waymax: dict, device: str) -> list[str]:
+    ratio = lambda value: _cell(value, "{:.2f}x")  # noqa: E731
+    count = lambda value: _cell(value, "{:,}")  # noqa: E731
+    lines = [f"Waymax {waymax['waymax']} (jax {waymax['jax']}, {waymax['device']}) run by {waymax['python']}",
+             "median scene-steps/s on the same scenes; physics = env step only, full = env + metrics + observation",
+             f"{'batch':>6}{'Waymax physics':>16}{'ours physics':>14}{'ours/Waymax':>13}{'ours full':>11}"
+             f"{'ours full/Waymax physics':>26}"]
+    for row in waymax["rows"]:
+        lines.append(f"{row['batch']:>6}{count(row['waymax_physics']):>16}{count(row['ours_physics']):>14}"
+                     f"{ratio(row['physics_ratio']):>13}{count(row['ours_full']):>11}"
+                     f"{ratio(row['full_over_waymax_physics']):>26}")
+    lines += [f"Waymax skipped batch {skip['batch']}: {skip['reason']}" for skip in waymax.get("skipped", [])]
+    if waymax["device"] != device:
+        lines.append(f"note: Waymax ran on {waymax['device']} and ours on {device}: the ratios compare two devices")
+    return lines

@@ -14,7 +14,7 @@ import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from scenariomax.schema import Sizes
+from scenariomax import Sizes
 
 DEMO_BASELINES = ("expert", "constant")
 # Behaviour cloning with the per-group MLP encoder learns to drive in minutes on two CPU cores;
@@ -23,9 +23,7 @@ DEMO_PRESET = "bc-mlp-navigation"
 
 
 def _convert(shards: Path, num_scenarios: int, seed: int, workers: int | None, num_objects: int):
-    from scenariomax.enrich.transform import make_transform
-    from scenariomax.pipeline import ConvertSettings, convert
-    from scenariomax.sources.synthetic import SyntheticSource
+    from scenariomax import ConvertSettings, SyntheticSource, convert, make_transform
 
     sizes = Sizes(num_objects=num_objects)
     transform, transform_settings = make_transform()
@@ -71,9 +69,7 @@ def run_demo(out: str | Path = "runs/demo", num_scenarios: int = 160, num_eval_s
 
     import jax
 
-    from scenariomax.inspect import format_report, inspect_shards, load_scenario
-    from scenariomax.render import render_scenario
-    from scenariomax.shards import read_shards
+    from scenariomax import format_report, inspect_shards, load_scenario, read_shards, render_scenario
     from vmax_sim.data import DataConfig, scenarios_to_batch
     from vmax_sim.evaluation import evaluate, format_summary
     from vmax_sim.evaluation.rollout import make_rollout_fn

@@ -15,9 +15,9 @@ from click.testing import CliRunner
 from PIL import Image
 
 import scenariomax
-from cli.vmax_cli import main
 from tests.integration_sim.conftest import SMALL_SIZES, braking_scenario, cruising_scenario
 from tests.policies.scenes import red_light_scenario
+from vmax_cli.vmax_cli import main
 from vmax_sim.evaluation.gallery import GalleryCollector
 from vmax_sim.evaluation.report import compare_policies
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 from click.testing import CliRunner
 
-from cli.vmax_cli import main
 from tests.evaluation import modes_scenes
+from vmax_cli.vmax_cli import main
 from vmax_sim.evaluation.evaluate import EvaluationResult
 from vmax_sim.evaluation.modes import EvalMode, parse_mode
 from vmax_sim.evaluation.report import PolicyRun, comparison_rows
@@ -23,7 +23,7 @@ def _one_line_error(args, fragment):
 
 def test_bad_modes_and_options_give_one_line_errors():
     _one_line_error(["--mode", "bogus"], "unknown evaluation mode 'bogus'")
-    _one_line_error(["--mode", "adversarial"], "not implemented yet")
+    _one_line_error(["--mode", "adversarial", "--perturb-sigma", "1"], "applies to --mode perturbed")
     _one_line_error(["--mode", "reactive", "--agents", "zombie"], "unknown agent driver 'zombie'")
     _one_line_error(["--agents", "pdm"], "apply to --mode reactive")
     _one_line_error(["--mode", "reactive", "--perturb-sigma", "2"], "applies to --mode perturbed")

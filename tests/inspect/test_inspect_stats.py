@@ -7,9 +7,9 @@ import json
 import pytest
 
 from scenariomax import write_shards
+from scenariomax.errors import InputError
 from scenariomax.inspect import format_report, inspect_shards, load_scenario
 from scenariomax.io.tfrecord import TFRecordWriter
-from scenariomax.sources.base import InputError
 from tests.conftest import realdata_file
 from tests.inspect import scenes
 from tests.inspect.scenes import SIZES, make_scenario
@@ -82,8 +82,10 @@ def test_scenario_block(stats, shard_dir):
     assert block["problems"] == []
 
 
-def test_unknown_scenario_id_is_marked_not_found(shard_dir):
-    assert inspect_shards(shard_dir, scenario_id="nope")["scenario"] == {"scenario_id": "nope", "found": False}
+def test_unknown_scenario_id_fails_before_any_statistics(shard_dir):
+    with pytest.raises(InputError) as error:
+        inspect_shards(shard_dir, scenario_id="nope")
+    assert str(error.value) == f"no scenario 'nope' in {shard_dir}; ids look like: scene-a, scene-b"
 
 
 def test_max_records_stops_early(shard_dir):

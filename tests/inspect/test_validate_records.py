@@ -11,9 +11,9 @@ from hypothesis import strategies as st
 
 from scenariomax import write_shards
 from scenariomax.codec import scenario_to_features
+from scenariomax.errors import InputError
 from scenariomax.io.example import encode_example
 from scenariomax.io.tfrecord import TFRecordWriter
-from scenariomax.sources.base import InputError
 from scenariomax.validate import format_validation, validate_record, validate_shards
 from tests.conftest import realdata_file
 from tests.inspect.scenes import SIZES, make_scenario
@@ -129,10 +129,10 @@ def test_bad_record_reported_with_file_index_and_id(tmp_path):
     path = tmp_path / "mixed.tfrecord"
     with TFRecordWriter(path) as writer:
         writer.write(_record())
-        writer.write(_record(**{"state/is_sdc": is_sdc}))
+        writer.write(_record(**{"state/is_sdc": is_sdc, "scenario/id": [b"scene-b"]}))
     report = validate_shards(path)
     assert report.num_records == 2
-    assert report.bad == ((str(path), 1, "scene-a", "expected exactly one SDC, found 2"),)
+    assert report.bad == ((str(path), 1, "scene-b", "expected exactly one SDC, found 2"),)
 
 
 def test_truncated_file_is_reported_and_validation_continues(tmp_path):
@@ -144,7 +144,9 @@ def test_truncated_file_is_reported_and_validation_continues(tmp_path):
     report = validate_shards(tmp_path)
     assert report.num_files == 2
     assert report.num_records == 3  # 1 from the damaged file + 2 from the next one
-    (entry,) = report.bad
+    size_problem, entry = report.bad  # the manifest notices the size first, then the framing says where
+    assert size_problem == (str(first), -1, "", f"{record_bytes + 100} bytes, manifest.json lists {len(data)}: "
+                            "the file was changed or cut short after it was written")
     assert entry.file == str(first) and entry.record_index == 1 and entry.scenario_id == ""
     assert entry.reason == (f"{first}: truncated record at byte {record_bytes} "
                             f"(expected {record_bytes - 16} bytes of data)")

@@ -9,9 +9,8 @@ import pytest
 
 from tests.integration_sim.conftest import braking_scenario, cruising_scenario, small_data_config
 from vmax_sim.data import scenarios_to_batch
-from vmax_sim.env import EnvConfig
+from vmax_sim.env import EnvConfig, make_environment
 from vmax_sim.env.metrics_adapter import (
-    make_environment,
     observation_inputs,
     reference_arcs,
     step_inputs,

@@ -7,7 +7,7 @@ import json
 import pytest
 from click.testing import CliRunner
 
-from cli.vmax_cli import main
+from vmax_cli.vmax_cli import main
 from vmax_sim.demo import run_demo
 
 
@@ -27,8 +27,8 @@ def test_evaluate_command_gives_one_line_errors(tmp_path):
     assert result.output.startswith("error: ") and len(result.output.strip().splitlines()) == 1
     assert "Traceback" not in result.output
     result = CliRunner().invoke(main, ["evaluate", "--policy", "expert", "--data", str(tmp_path),
-                                       "--mode", "adversarial"])
-    assert result.exit_code == 2 and "not implemented yet" in result.output
+                                       "--mode", "sideways"])
+    assert result.exit_code == 2 and "unknown evaluation mode 'sideways'" in result.output
 
 
 def test_bench_rejects_bad_batch_sizes():

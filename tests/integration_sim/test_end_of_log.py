@@ -11,8 +11,7 @@ import pytest
 
 from tests.integration_sim.conftest import cruising_scenario, small_data_config
 from vmax_sim.data import scenarios_to_batch
-from vmax_sim.env import EnvConfig, sdc_log_ended
-from vmax_sim.env.metrics_adapter import make_environment
+from vmax_sim.env import EnvConfig, make_environment, sdc_log_ended
 from vmax_sim.evaluation import make_policy, make_rollout_fn
 from vmax_sim.metrics import MetricsConfig
 from vmax_sim.observation import ObservationConfig
@@ -84,3 +83,17 @@ def test_environment_truncates_at_the_end_of_the_sdc_log():
     no_sdc = state.replace(object_metadata=state.object_metadata.replace(
         is_sdc=np.zeros_like(state.object_metadata.is_sdc)))
     assert not bool(sdc_log_ended(no_sdc))
+
+
+def test_an_episode_with_no_judged_step_is_left_out_of_the_summary(tmp_path):
+    import scenariomax
+    from tests.integration_sim.conftest import SMALL_SIZES, braking_scenario
+    from vmax_sim.evaluation import evaluate
+
+    # constant velocity fails "brake"; "ends" has no judged step (it would score as a perfect episode)
+    scenarios = [braking_scenario("brake"), log_ending_at(CONFIG.first_policy_timestep, "ends")]
+    scenariomax.write_shards(scenarios, tmp_path, sizes=SMALL_SIZES)
+    result = evaluate("constant", small_data_config(tmp_path), env_config=CONFIG)
+    assert result.episodes["judged_steps"].tolist()[1] == 0.0 and result.episodes["judged_steps"][0] > 0
+    assert result.summary["num_episodes"] == 2 and result.summary["num_unjudged"] == 1
+    assert result.summary["accuracy"] == 0.0  # over the one judged episode, not 0.5

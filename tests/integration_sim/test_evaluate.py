@@ -10,11 +10,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError
 from tests.integration_sim.conftest import braking_scenario, cruising_scenario, small_data_config
 from vmax_sim.data import scenarios_to_batch
-from vmax_sim.env import EnvConfig
-from vmax_sim.env.metrics_adapter import make_environment
+from vmax_sim.env import EnvConfig, make_environment
 from vmax_sim.evaluation import evaluate, make_policy, make_rollout_fn, run_episode
 from vmax_sim.metrics import MetricsConfig
 from vmax_sim.observation import ObservationConfig
@@ -123,8 +122,8 @@ def test_callable_policy_gets_an_observation(road_shards):
 
 
 def test_bad_inputs_give_clear_errors(road_shards, tmp_path):
-    with pytest.raises(ValueError, match="not implemented yet"):
-        evaluate("expert", small_data_config(road_shards), mode="adversarial")
+    with pytest.raises(ValueError, match="unknown evaluation mode 'sideways'"):
+        evaluate("expert", small_data_config(road_shards), mode="sideways")
     with pytest.raises(ValueError, match="unknown policy"):
         evaluate("idm-ish", small_data_config(road_shards))
     with pytest.raises(InputError):

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError
 from tests.metrics.helpers import LEFT_EDGE_Y, RIGHT_EDGE_Y, road_index, route_paths, straight_road
 from vmax_sim.map_index import (
     MapIndexConfig,

@@ -15,8 +15,7 @@ from scenariomax.enrich.roadgraph import LaneLinks, MapPolyline, lane_graph_arra
 from scenariomax.schema import OBJECT_TYPE_VEHICLE, RG_LANE_SURFACE_STREET, RG_ROAD_EDGE_BOUNDARY, TL_GO, TL_STOP
 from tests.integration_sim.conftest import DT, NUM_STEPS, road_scenario, small_data_config
 from vmax_sim.data import scenarios_to_batch
-from vmax_sim.env import EnvConfig
-from vmax_sim.env.metrics_adapter import make_environment
+from vmax_sim.env import EnvConfig, make_environment
 from vmax_sim.evaluation import make_policy, run_episode
 from vmax_sim.metrics import MetricsConfig
 from vmax_sim.observation import ObservationConfig

@@ -25,8 +25,7 @@ from tests.policies.scenes import (
     lead_car_scenario,
     red_light_scenario,
 )
-from vmax_sim.env import EnvConfig
-from vmax_sim.env.metrics_adapter import make_environment
+from vmax_sim.env import EnvConfig, make_environment
 from vmax_sim.evaluation import POLICY_NAMES, evaluate, make_policy
 from vmax_sim.policies import IDMConfig, idm_acceleration, idm_action, idm_policy, pure_pursuit_curvature
 

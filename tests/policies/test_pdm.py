@@ -18,7 +18,7 @@ from tests.integration_sim.conftest import (
     small_data_config,
 )
 from tests.policies.scenes import ENV_CONFIG, as_state, empty_road_scenario, episode, episode_fn, lead_car_scenario
-from vmax_sim.env.metrics_adapter import make_environment
+from vmax_sim.env import make_environment
 from vmax_sim.evaluation import evaluate
 from vmax_sim.policies import PDMConfig, pdm_plan
 from vmax_sim.policies.idm import perceive

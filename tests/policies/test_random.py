@@ -6,8 +6,7 @@ import jax
 import numpy as np
 
 from tests.policies.scenes import ENV_CONFIG, as_state, empty_road_scenario, episode
-from vmax_sim.env import EnvConfig
-from vmax_sim.env.metrics_adapter import make_environment
+from vmax_sim.env import EnvConfig, make_environment
 from vmax_sim.policies import random_policy
 
 

@@ -8,7 +8,7 @@ import json
 import pytest
 from click.testing import CliRunner
 
-from cli.vmax_cli import main
+from vmax_cli.vmax_cli import main
 from vmax_sim.evaluation.report import TABLE_ROWS, compare_policies, format_markdown, table_csv, write_report
 
 

@@ -7,8 +7,8 @@ import pytest
 from conftest import REALDATA, SMALL_SIZES, make_scenario, small_config
 
 import scenariomax
+from scenariomax.errors import InputError
 from scenariomax.shards import RecordError, ShardReadError
-from scenariomax.sources.base import InputError
 from vmax_sim.data import (
     DataConfig,
     iter_scenarios,

@@ -11,12 +11,12 @@ import pytest
 from click.testing import CliRunner
 
 import scenariomax
-from cli.scenariomax_cli import main
 from scenariomax.io.tfrecord import frame_record
 from scenariomax.view import ShardIndex, pack_scene, render_page, scene_from_scenario, unpack_scene, write_view
 from scenariomax.view.scene import roadgraph_polylines
 from tests.conftest import realdata_file, straight_road_scenario
 from tests.integration_sim.conftest import SMALL_SIZES, braking_scenario, cruising_scenario
+from vmax_cli.scenariomax_cli import main
 
 MAX_SINGLE_SCENARIO_HTML = 2_000_000
 
@@ -69,7 +69,7 @@ def test_the_index_skims_the_ids_of_every_record_without_decoding(shards):
     index = ShardIndex.build(shards)
     assert len(index.files) == 2 and [e.scenario_id for e in index.entries] == ["cruise", "brake", "toy"]
     assert index.find("toy") == 2 and index.check(1).scenario.scenario_id == "brake"
-    with pytest.raises(scenariomax.sources.base.InputError, match="no scenario with id 'nope'"):
+    with pytest.raises(scenariomax.errors.InputError, match="no scenario with id 'nope'"):
         index.find("nope")
 
 

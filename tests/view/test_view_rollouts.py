@@ -12,12 +12,12 @@ import pytest
 from click.testing import CliRunner
 
 import scenariomax
-from cli.vmax_cli import main
 from scenariomax.view import unpack_scene
 from tests.integration_sim.conftest import SMALL_SIZES, braking_scenario, cruising_scenario
 from tests.policies.scenes import red_light_scenario
 from tests.training.conftest import synthetic_shards  # noqa: F401, F811 - a fixture (12 enriched synthetic scenes)
 from tests.view.browser import colour_mask, needs_browser, rgb, run_chromium, status
+from vmax_cli.vmax_cli import main
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +63,7 @@ def test_only_the_first_scenarios_are_kept_with_each_policy_s_simulated_sdc(page
 
 
 def test_bad_input_is_one_line(shards, tmp_path):
-    for args, message in (([str(tmp_path / "nope")], "no such training run directory, shard file"),
+    for args, message in (([str(tmp_path / "nope")], "no such training run directory, evaluation directory"),
                           ([str(tmp_path)], "no .tfrecord files found"),
                           ([str(shards), "--policy", "bogus"], "unknown policy 'bogus'"),
                           ([str(shards), "--data", str(shards)], "--data goes with a training run directory")):
@@ -106,3 +106,44 @@ def test_a_training_run_shows_its_own_policy_on_its_held_out_split(synthetic_sha
     assert sorted(by_id) == sorted(held_out)
     for meta, _ in by_id.values():
         assert [sim["name"] for sim in meta["sims"]] == ["sac-mlp@run", "expert"]
+
+
+@pytest.fixture(scope="module")
+def evaluation(shards, tmp_path_factory) -> Path:
+    """`vmax-sim evaluate --out DIR --view`: constant and expert on brake, cruise, red (constant fails brake)."""
+    out = tmp_path_factory.mktemp("evaluation")
+    result = CliRunner().invoke(main, ["evaluate", "--policy", "constant,expert", "--data", str(shards),
+                                       "--num-objects", "8", "--out", str(out), "--view", "--view-max", "1",
+                                       "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert f"wrote the rollout viewer {out / 'rollouts.html'}" in result.output
+    return out
+
+
+def failed_by_constant(evaluation: Path) -> list[str]:
+    rows = (evaluation / "episodes-constant.csv").read_text().splitlines()
+    keys = rows[0].split(",")
+    return [row.split(",")[0] for row in rows[1:] if float(row.split(",")[keys.index("accurate")]) < 0.5]
+
+
+def test_evaluate_view_writes_the_failed_episodes_first_with_every_policy(evaluation):
+    by_id = scenes(evaluation / "rollouts.html")
+    assert list(by_id) == ["brake"]  # --view-max 1: the first failed episode, not the first scenario
+    meta, _ = by_id["brake"]
+    assert [sim["name"] for sim in meta["sims"]] == ["constant", "expert"]
+    assert meta["sims"][0]["failures"][0]["metric"] == "overlap" and meta["sims"][1]["failures"] == []
+
+
+def test_viewing_an_evaluation_directory_reruns_its_policies_on_its_failures_first(evaluation, tmp_path):
+    failed = failed_by_constant(evaluation)
+    assert "brake" in failed and "cruise" not in failed
+    out = tmp_path / "eval.html"
+    result = CliRunner().invoke(main, ["view", str(evaluation), "--num-scenarios", "3", "--out", str(out),
+                                       "--quiet"])
+    assert result.exit_code == 0, result.output
+    page_ids = list(scenes(out))  # in page order
+    assert page_ids[:len(failed)] == [i for i in ["brake", "cruise", "red"] if i in failed]  # failed first
+    assert sorted(page_ids) == ["brake", "cruise", "red"]
+    for meta, _ in scenes(out).values():
+        assert [sim["name"] for sim in meta["sims"]] == ["constant", "expert"]
+    assert "from the evaluation" in out.read_text()

@@ -16,11 +16,11 @@ import pytest
 from click.testing import CliRunner
 
 import scenariomax
-from cli.scenariomax_cli import main
 from scenariomax.io.tfrecord import frame_record
 from scenariomax.view import make_server, unpack_scene
 from tests.integration_sim.conftest import SMALL_SIZES, braking_scenario, cruising_scenario
 from tests.view.browser import colour_mask, needs_browser, rgb, run_chromium, status
+from vmax_cli.scenariomax_cli import main
 
 OPEN_BUDGET_S = 3.0  # index + first page + the first scene, for 1,000 scenarios
 

@@ -1,6 +1,6 @@
 """Loading scenariomax shards into fixed-shape, batched `SimulatorState`s."""
 
-from vmax_sim.data.config import DataConfig
+from vmax_sim.data.config import DataConfig, cache_dir
 from vmax_sim.data.convert import (
     build_map_index_for,
     object_slots,
@@ -12,6 +12,8 @@ from vmax_sim.data.convert import (
 )
 from vmax_sim.data.loader import (
     PrefetchIterator,
+    indexed_to_numpy_state,
+    iter_indexed_scenarios,
     iter_numpy_batches,
     iter_numpy_states,
     iter_scenarios,
@@ -23,6 +25,9 @@ __all__ = [
     "DataConfig",
     "PrefetchIterator",
     "build_map_index_for",
+    "cache_dir",
+    "indexed_to_numpy_state",
+    "iter_indexed_scenarios",
     "iter_numpy_batches",
     "iter_numpy_states",
     "iter_scenarios",

@@ -3,7 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import os
+from pathlib import Path
 from typing import Any
+
+
+def cache_dir() -> Path:
+    """Root of vmax_sim's caches (synthetic shards, map indices): $VMAX_CACHE_DIR, default ~/.cache/vmax_sim."""
+    return Path(os.environ.get("VMAX_CACHE_DIR", Path.home() / ".cache" / "vmax_sim"))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -26,6 +33,10 @@ class DataConfig:
     include_agent_paths: bool = False
     num_points_per_agent_path: int = 200  # 1 m apart: longer shard paths are cut, shorter padded
     map_index_config: Any = None  # passed to vmax_sim.map_index.build_map_index (None: its default)
+    # reuse map indices built before, kept per shard under $VMAX_CACHE_DIR/map_index (vmax_sim.data.map_index_cache;
+    # the environment variable VMAX_MAP_INDEX_CACHE=0 also turns it off)
+    map_index_cache: bool = True
+    map_index_cache_max_gb: float = 32.0  # bound of that folder (an entry: the index's bytes x scenarios)
 
     def __post_init__(self) -> None:
         for name in ("batch_size", "num_objects", "num_roadgraph_points", "num_paths", "num_points_per_path",
@@ -34,3 +45,5 @@ class DataConfig:
                 raise ValueError(f"DataConfig.{name} must be at least 1, got {getattr(self, name)}")
         if self.prefetch < 0 or self.shuffle_buffer < 0 or self.num_workers < 0:
             raise ValueError("DataConfig.prefetch, shuffle_buffer and num_workers must not be negative")
+        if not self.map_index_cache_max_gb > 0:
+            raise ValueError(f"DataConfig.map_index_cache_max_gb must be positive, got {self.map_index_cache_max_gb}")

@@ -10,9 +10,9 @@ from collections.abc import Iterable, Sequence
 import jax
 import numpy as np
 
-from scenariomax.enrich.budget import distance_to_polyline_points, sdc_positions
-from scenariomax.scenario import Scenario
-from scenariomax.sources.base import InputError
+from scenariomax import Scenario
+from scenariomax.crop import distance_to_points, sdc_positions
+from scenariomax.errors import InputError
 from vmax_sim.data.config import DataConfig
 from vmax_sim.datatypes import (
     ObjectMetadata,
@@ -86,7 +86,7 @@ def roadgraph_selection(scenario: Scenario, num_points: int) -> np.ndarray:
     if kept.size <= num_points:
         return kept
     anchors = sdc_positions(scenario)[::5]
-    dist = distance_to_polyline_points(scenario.roadgraph_xyz[kept, :2].astype(np.float64), anchors)
+    dist = distance_to_points(scenario.roadgraph_xyz[kept, :2].astype(np.float64), anchors)
     return np.sort(kept[np.argpartition(dist, num_points - 1)[:num_points]])
 
 
@@ -196,9 +196,9 @@ def _agent_paths(scenario: Scenario, slots: np.ndarray, num_objects: int, num_po
 def build_map_index_for(roadgraph: RoadgraphPoints, center_xy: np.ndarray, config: DataConfig):
     """The map index of one roadgraph, centred on `center_xy` (2,) (numpy, host).
 
-    The one place that imports vmax_sim.map_index (part of the simulator, built alongside).
+    The data path's one call into the host side of the map index (`vmax_sim.map_index.build`).
     """
-    from vmax_sim.map_index import build_map_index
+    from vmax_sim.map_index.build import build_map_index
 
     xyz = np.stack([roadgraph.x, roadgraph.y, roadgraph.z], axis=-1)
     direction = np.stack([roadgraph.dir_x, roadgraph.dir_y, roadgraph.dir_z], axis=-1)

@@ -1,12 +1,14 @@
 """`make_data_iterator`: shards -> shuffled, repeated, batched SimulatorStates, prefetched on a thread.
 
 Host work (decoding, cropping, map-index building) runs in a background thread that keeps
-`prefetch` device batches ready, so the jitted simulator does not wait for the data.
+`prefetch` device batches ready, so the jitted simulator does not wait for the data. Map indices come from
+the disk cache of `vmax_sim.data.map_index_cache` when it holds the shard (built and written there otherwise).
 """
 
 from __future__ import annotations
 
 import collections
+import dataclasses
 import multiprocessing
 import queue
 import threading
@@ -17,14 +19,15 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from scenariomax.scenario import Scenario
-from scenariomax.shards import list_shard_files, read_shards
-from scenariomax.sources.base import InputError
+from scenariomax import Scenario, list_shard_files, read_shards
+from scenariomax.errors import InputError
 from vmax_sim.data.config import DataConfig
 from vmax_sim.data.convert import scenario_to_numpy_state, stack_states
+from vmax_sim.data.map_index_cache import IndexSource, MapIndexCache, open_map_index_cache
 from vmax_sim.datatypes import SimulatorState
 
 _END = object()
+IndexedScenario = tuple[Scenario, IndexSource | None]  # a scenario and where its map index comes from (None: built)
 
 
 def _shard_files(path: str) -> list[Path]:
@@ -34,15 +37,18 @@ def _shard_files(path: str) -> list[Path]:
         raise InputError(str(error)) from None
 
 
-def _scenarios_once(files: list[Path], rng: np.random.Generator | None) -> Iterator[Scenario]:
+def _scenarios_once(files: list[Path], rng: np.random.Generator | None,
+                    cache: MapIndexCache | None) -> Iterator[IndexedScenario]:
     order = rng.permutation(len(files)) if rng is not None else range(len(files))
     for index in order:
-        yield from read_shards(files[index])
+        rows = cache.shard_rows(files[index]) if cache is not None else None
+        for row, scenario in enumerate(read_shards(files[index])):
+            yield scenario, rows.source(row) if rows is not None else None
 
 
-def _shuffled(scenarios: Iterable[Scenario], rng: np.random.Generator, buffer_size: int) -> Iterator[Scenario]:
+def _shuffled(scenarios: Iterable, rng: np.random.Generator, buffer_size: int) -> Iterator:
     """Reservoir-style shuffle buffer: memory is `buffer_size` scenarios, whatever the data size."""
-    buffer: list[Scenario] = []
+    buffer: list = []
     for scenario in scenarios:
         if len(buffer) < buffer_size:
             buffer.append(scenario)
@@ -54,13 +60,12 @@ def _shuffled(scenarios: Iterable[Scenario], rng: np.random.Generator, buffer_si
         yield buffer[slot]
 
 
-def iter_scenarios(config: DataConfig) -> Iterator[Scenario]:
-    """Scenarios in the order batches use them: seeded shuffle per pass, repeated when asked."""
+def _indexed_scenarios(config: DataConfig, cache: MapIndexCache | None) -> Iterator[IndexedScenario]:
     files = _shard_files(config.path)
     rng = np.random.default_rng(config.shuffle_seed) if config.shuffle_seed is not None else None
     while True:
         count = 0
-        stream = _scenarios_once(files, rng)
+        stream = _scenarios_once(files, rng, cache)
         if rng is not None and config.shuffle_buffer > 1:
             stream = _shuffled(stream, rng, config.shuffle_buffer)
         for scenario in stream:
@@ -72,22 +77,57 @@ def iter_scenarios(config: DataConfig) -> Iterator[Scenario]:
             return
 
 
+def iter_scenarios(config: DataConfig) -> Iterator[Scenario]:
+    """Scenarios in the order batches use them: seeded shuffle per pass, repeated when asked."""
+    for scenario, _ in _indexed_scenarios(config, None):
+        yield scenario
+
+
+def iter_indexed_scenarios(config: DataConfig) -> Iterator[IndexedScenario]:
+    """`iter_scenarios`, each with where its map index comes from (the cache, when on); convert the pairs with
+    `indexed_to_numpy_state`. Skipping pairs costs the decode only."""
+    yield from _indexed_scenarios(config, open_map_index_cache(config))
+
+
+def _conversion_config(source: IndexSource | None, config: DataConfig) -> DataConfig:
+    if source is None or source.builds_index:
+        return config
+    return dataclasses.replace(config, include_map_index=False)  # the index comes from the cache
+
+
+def _finish(state: SimulatorState, item: IndexedScenario, config: DataConfig) -> SimulatorState:
+    """Puts a cached index into `state`, or writes the index just built into the cache."""
+    scenario, source = item
+    if source is None:
+        return state
+    return source.finish(state, scenario.scenario_id, lambda: scenario_to_numpy_state(scenario, config).map_index)
+
+
+def indexed_to_numpy_state(item: IndexedScenario, config: DataConfig) -> SimulatorState:
+    """`scenario_to_numpy_state` of a pair from `iter_indexed_scenarios`: the same arrays, bit for bit."""
+    scenario, source = item
+    return _finish(scenario_to_numpy_state(scenario, _conversion_config(source, config)), item, config)
+
+
 def iter_numpy_states(config: DataConfig) -> Iterator[SimulatorState]:
     """Unbatched host states in scenario order, converted by `num_workers` processes when > 0."""
     if config.num_workers == 0:
-        for scenario in iter_scenarios(config):
-            yield scenario_to_numpy_state(scenario, config)
+        for item in iter_indexed_scenarios(config):
+            yield indexed_to_numpy_state(item, config)
         return
     # spawn, not fork: the parent has JAX (and its threads) running.
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(config.num_workers, mp_context=context) as pool:
         in_flight: collections.deque = collections.deque()
-        for scenario in iter_scenarios(config):
-            in_flight.append(pool.submit(scenario_to_numpy_state, scenario, config))
+        for item in iter_indexed_scenarios(config):
+            scenario, source = item
+            in_flight.append((item, pool.submit(scenario_to_numpy_state, scenario, _conversion_config(source, config))))
             if len(in_flight) >= 2 * config.num_workers + config.batch_size:
-                yield in_flight.popleft().result()
+                done, future = in_flight.popleft()
+                yield _finish(future.result(), done, config)
         while in_flight:
-            yield in_flight.popleft().result()
+            done, future = in_flight.popleft()
+            yield _finish(future.result(), done, config)
 
 
 def iter_numpy_batches(config: DataConfig) -> Iterator[SimulatorState]:
@@ -173,11 +213,11 @@ def make_data_iterator(config: DataConfig) -> Iterator[SimulatorState]:
 def load_batch(config: DataConfig, num_scenarios: int | None = None) -> SimulatorState:
     """The first `num_scenarios` scenarios of `config.path` (all when None) as one device batch."""
     states = []
-    _shard_files(config.path)
-    for scenario in read_shards(config.path):
+    files = _shard_files(config.path)
+    for item in _scenarios_once(files, None, open_map_index_cache(config)):
         if num_scenarios is not None and len(states) >= num_scenarios:
             break
-        states.append(scenario_to_numpy_state(scenario, config))
+        states.append(indexed_to_numpy_state(item, config))
     if not states:
         raise InputError(f"{config.path}: the shard files hold no scenarios")
     return jax.device_put(stack_states(states))

@@ -3,8 +3,9 @@
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.environment import Environment, controlled_mask, merge_next_state, sdc_log_ended
 from vmax_sim.env.expert import expert_actions, log_actions
+from vmax_sim.env.factory import make_environment
 from vmax_sim.env.gym_adapter import Box, GymEnv, sdc_frame_features, zero_reward
-from vmax_sim.env.metrics_adapter import make_environment, make_termination_fn, termination_fns
+from vmax_sim.env.metrics_adapter import make_termination_fn, termination_fns
 from vmax_sim.env.multi_agent import MultiAgentEnvironment, merge_actions, sdc_and_agents_action
 from vmax_sim.env.termination import TerminationFn, combine_termination_fns
 from vmax_sim.env.wrappers import (

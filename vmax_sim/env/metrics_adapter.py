@@ -1,5 +1,6 @@
 """Adapter from `SimulatorState` to the metrics' `StepInputs` and the observation's `ObservationInputs`,
-plus the metric-based termination functions the `Environment` takes.
+plus the metric-based termination functions the `Environment` takes (`vmax_sim.env.factory.make_environment`
+builds it with them).
 
 Everything here works on one unbatched state (vmap for batches), is pure and jittable. The
 scored agent is the SDC; the SDC's own slot is never an "other object".
@@ -14,9 +15,8 @@ import jax.numpy as jnp
 
 from vmax_sim.datatypes import SimulatorState, Trajectory
 from vmax_sim.env.config import EnvConfig
-from vmax_sim.env.environment import Environment
 from vmax_sim.env.termination import TerminationFn, combine_termination_fns
-from vmax_sim.map_index import lane_candidates, nearest_lane, route_reference_arcs
+from vmax_sim.map_index.query import lane_candidates, nearest_lane, route_reference_arcs
 from vmax_sim.metrics import (
     MetricsConfig,
     SharedQueries,
@@ -206,9 +206,3 @@ def termination_fns(config: MetricsConfig | None = None) -> Mapping[str, Termina
 def make_termination_fn(env_config: EnvConfig, metrics_config: MetricsConfig | None = None) -> TerminationFn | None:
     """The OR of the predicates named in `env_config.terminate_on` (None when empty)."""
     return combine_termination_fns(termination_fns(metrics_config), env_config.terminate_on)
-
-
-def make_environment(env_config: EnvConfig | None = None, metrics_config: MetricsConfig | None = None) -> Environment:
-    """An `Environment` whose termination follows `env_config.terminate_on` (needs states with a map index)."""
-    env_config = env_config or EnvConfig()
-    return Environment(env_config, termination_fn=make_termination_fn(env_config, metrics_config))

@@ -9,18 +9,18 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import warnings
 from collections.abc import Iterable, Iterator
 
 import jax
 import numpy as np
 
-from scenariomax.scenario import Scenario
-from scenariomax.shards import read_shards
-from scenariomax.sources.base import InputError
+from scenariomax import Scenario, read_shards
+from scenariomax.errors import InputError
 from vmax_sim.data import DataConfig, scenario_to_numpy_state, stack_states
 from vmax_sim.datatypes import SimulatorState
 from vmax_sim.env.config import EnvConfig
-from vmax_sim.env.metrics_adapter import make_environment
+from vmax_sim.env.factory import make_environment
 from vmax_sim.evaluation.mode_rollout import make_batch_runner
 from vmax_sim.evaluation.modes import MODE_NAMES, PLANNED_MODES, EvalMode, parse_mode  # noqa: F401
 from vmax_sim.evaluation.policies import Policy, make_policy
@@ -101,9 +101,15 @@ def prepare_batches(data, num_scenarios: int | None = None) -> PreparedBatches:
 
 
 def _summary(episodes: dict[str, np.ndarray], policy: str, mode: str | EvalMode) -> dict:
-    means = {k: float(np.mean(v)) for k, v in episodes.items()}
-    summary = {"policy": policy, "mode": getattr(mode, "name", mode),
-               "num_episodes": int(len(next(iter(episodes.values()))))}
+    """Means over the judged episodes: one whose SDC log ends at the start step has no scored step, would
+    score as perfect and is left out (counted in "num_unjudged"; its row stays in the per-episode table)."""
+    total = int(len(next(iter(episodes.values()))))
+    judged = episodes["judged_steps"] > 0 if "judged_steps" in episodes else np.ones(total, bool)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # every episode unjudged: NaN means
+        means = {k: float(np.mean(v[judged])) for k, v in episodes.items()}
+    summary = {"policy": policy, "mode": getattr(mode, "name", mode), "num_episodes": total,
+               "num_unjudged": int(total - judged.sum())}
     if isinstance(mode, EvalMode) and mode.options():
         summary["mode_options"] = mode.options()
     summary["accuracy"] = means.pop("accurate")
@@ -117,7 +123,8 @@ def _summary(episodes: dict[str, np.ndarray], policy: str, mode: str | EvalMode)
 def evaluate(policy, data, mode: str | EvalMode = "non_reactive", *, data_config: DataConfig | None = None,
              env_config: EnvConfig | None = None, metrics_config: MetricsConfig | None = None,
              obs_config: ObservationConfig | None = None, num_scenarios: int | None = None,
-             batch_size: int | None = None, seed: int = 0, policy_params=None, on_batch=None) -> EvaluationResult:
+             batch_size: int | None = None, seed: int = 0, policy_params=None, on_batch=None,
+             progress=None) -> EvaluationResult:
     """Runs one episode per scenario and scores it.
 
     policy: "expert", "constant", a `Policy`, or a jittable callable `fn(observation, key)` returning the
@@ -132,6 +139,7 @@ def evaluate(policy, data, mode: str | EvalMode = "non_reactive", *, data_config
     on_batch: called after every batch as on_batch(scenario ids, host batch, host Rollout, number of real
     episodes); the Rollout then also holds the simulated trajectories (`Rollout.trajectory`). The failure
     gallery and the difficulty report use it (vmax_sim.evaluation.gallery / difficulty).
+    progress: a `scenariomax.progress.Progress` (or anything with `update(n)`) told the episodes done.
     """
     mode = _check_mode(mode, seed)
     if isinstance(data, PreparedBatches):
@@ -168,6 +176,8 @@ def evaluate(policy, data, mode: str | EvalMode = "non_reactive", *, data_config
         scenario_ids += ids
         if on_batch is not None:
             on_batch(ids, batch, jax.device_get(rollout), real)
+        if progress is not None:
+            progress.update(real)
     if not scenario_ids:
         raise InputError(f"{getattr(data_config, 'path', data)}: no scenarios to evaluate")
     episodes = {name: np.concatenate(parts).astype(np.float32) for name, parts in collected.items()}
@@ -178,6 +188,8 @@ def evaluate(policy, data, mode: str | EvalMode = "non_reactive", *, data_config
 def format_summary(summary: dict) -> str:
     """A small table: episodes, the four scores, then the mean of every episode metric."""
     lines = [f"policy: {summary['policy']}  mode: {summary['mode']}  episodes: {summary['num_episodes']}"]
+    if summary.get("num_unjudged"):
+        lines[0] += f" ({summary['num_unjudged']} with no judged step left out: their SDC log ends at the start)"
     lines += [f"  {key:<28}{summary[key]:>10.4f}" for key in SCORE_KEYS]
     if summary.get("mode_options"):
         lines[0] += "  (" + ", ".join(f"{k}={v}" for k, v in summary["mode_options"].items()) + ")"

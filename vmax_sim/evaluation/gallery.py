@@ -222,6 +222,17 @@ def _folder_names(names: Sequence[str]) -> list[str]:
 
 # --- drawing ---------------------------------------------------------------------------------------
 
+def _headless_pyplot():
+    """matplotlib.pyplot on the Agg backend (no display needed: servers, worker processes)."""
+    import matplotlib
+
+    if matplotlib.get_backend().lower() != "agg":
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 class EpisodeFigure:
     """A matplotlib figure of one episode. The map, paths, logged trajectories and legend are drawn once
     (the background); `image(frame)` restores it and draws only the moving artists (boxes, lights, the
@@ -229,7 +240,7 @@ class EpisodeFigure:
 
     def __init__(self, capture: EpisodeCapture, policy: str, figsize: tuple[float, float] = (7.2, 6.0),
                  dpi: float = 72):
-        plt = scene_render._import_pyplot()
+        plt = _headless_pyplot()
         from matplotlib.collections import LineCollection, PolyCollection
 
         self.c, self.policy, self.plt = capture, policy, plt

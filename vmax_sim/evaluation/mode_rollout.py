@@ -24,6 +24,7 @@ import jax.numpy as jnp
 from vmax_sim.datatypes import SimulatorState
 from vmax_sim.env.metrics_adapter import reference_arcs, sdc_observation, step_inputs
 from vmax_sim.env.multi_agent import sdc_and_agents_action
+from vmax_sim.evaluation.adversary import plan_adversary
 from vmax_sim.evaluation.modes import EvalMode
 from vmax_sim.evaluation.perturb import perturb_start
 from vmax_sim.evaluation.policies import Policy
@@ -35,7 +36,7 @@ from vmax_sim.evaluation.reactive import (
     other_collision,
     stop_sign_points,
 )
-from vmax_sim.evaluation.rollout import Rollout, end_of_log, make_rollout_fn, recorded_trajectory
+from vmax_sim.evaluation.rollout import Rollout, episode_extent, make_rollout_fn, recorded_trajectory
 from vmax_sim.metrics import MetricsConfig, episode_metrics, shared_queries, step_metrics
 from vmax_sim.observation import ObservationConfig
 
@@ -52,6 +53,8 @@ def run_mode_episode(env, policy: Policy, mode: EvalMode, state: SimulatorState,
     extra: dict = {}
     if mode.is_perturbed:
         state, extra = perturb_start(state, mode_key, mode.perturb, first, metrics_config)
+    if mode.is_adversarial:
+        state, extra = plan_adversary(state, mode.adversary, first, env.config.episode_length)
     if mode.is_reactive:
         check_agent_paths(state)
         agent_fn = agent_fn or make_agent_fn(mode, env, policy, metrics_config, obs_config)
@@ -90,7 +93,7 @@ def run_mode_episode(env, policy: Policy, mode: EvalMode, state: SimulatorState,
         episode[name] = jnp.any(flags & step_valid).astype(jnp.float32)
     episode.update({name: jnp.asarray(value, jnp.float32) for name, value in extra.items()})
     per_step = {**per_step, **{name: flags.astype(jnp.float32) for name, flags in own.items()}}
-    episode["end_of_log"] = end_of_log(state, env)
+    episode.update(episode_extent(state, env, step_valid))
     trajectory = recorded_trajectory(last, first_timestep) if record_trajectory else None
     return Rollout(per_step=per_step, step_valid=step_valid, terminated=terminated, episode=episode,
                    trajectory=trajectory)

@@ -17,8 +17,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-MODE_NAMES = ("non_reactive", "reactive", "perturbed")
-PLANNED_MODES = ("adversarial",)
+MODE_NAMES = ("non_reactive", "reactive", "perturbed", "adversarial")
+PLANNED_MODES: tuple[str, ...] = ()
 AGENT_DRIVERS = ("idm", "pdm", "same")
 AGENT_SPEEDS = ("limit", "log")
 
@@ -47,6 +47,37 @@ class PerturbConfig:
 
 
 @dataclasses.dataclass(frozen=True)
+class AdversaryConfig:
+    """ReGentS-style cut-in attack by one logged vehicle (see `vmax_sim.evaluation.adversary`)."""
+
+    num_candidates: int = 4  # vehicles attacked in parallel, nearest logged approach to the SDC first
+    search_radius: float = 40.0  # m; vehicles whose logged future never comes this close are not candidates
+    iterations: int = 80  # Adam steps
+    learning_rate: float = 0.05  # in units of max_accel / max_curvature
+    softmin_temperature: float = 0.5  # m
+    rear_penalty: float = 3.0  # extra distance per metre the adversary is behind the SDC's rear bumper
+    log_weight: float = 0.5  # pull towards the logged actions (mean squared, normalised units)
+    min_contact_step: int = 15  # policy steps (1.5 s) before the adversary may touch the SDC
+    # kinematic bounds of the adversary (every planned trajectory stays inside them)
+    max_accel: float = 3.0  # m/s^2
+    max_decel: float = 6.0  # m/s^2
+    max_curvature: float = 0.2  # 1/m (5 m radius)
+    max_curvature_rate: float = 0.01  # 1/m per 0.1 s step (no swinging turns)
+    max_lateral_accel: float = 4.0  # m/s^2, v^2 |k|
+    speed_factor: float = 1.25  # top speed: this times the vehicle's fastest logged speed ...
+    min_max_speed: float = 8.0  # ... but at least this, m/s (a parked car may pull out)
+
+    def __post_init__(self):
+        for name in ("num_candidates", "iterations", "min_contact_step"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"AdversaryConfig.{name} must be at least 1, got {getattr(self, name)}")
+        for name in ("search_radius", "learning_rate", "softmin_temperature", "max_accel", "max_decel",
+                     "max_curvature", "max_curvature_rate", "max_lateral_accel", "speed_factor", "min_max_speed"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"AdversaryConfig.{name} must be positive, got {getattr(self, name)}")
+
+
+@dataclasses.dataclass(frozen=True)
 class EvalMode:
     name: str = "non_reactive"  # one of MODE_NAMES
     # reactive: who drives the controllable agents: "idm", "pdm" or "same" (the evaluated policy, self-play)
@@ -61,6 +92,7 @@ class EvalMode:
     # virtual leader it may fall behind but not overtake; see docs/evaluation-modes.md)
     agent_follow_log: bool = True
     perturb: PerturbConfig = PerturbConfig()
+    adversary: AdversaryConfig = AdversaryConfig()
     seed: int = 0  # perturbed: with the scenario id, picks each scenario's perturbation
 
     def __post_init__(self):
@@ -83,6 +115,10 @@ class EvalMode:
     def is_perturbed(self) -> bool:
         return self.name == "perturbed"
 
+    @property
+    def is_adversarial(self) -> bool:
+        return self.name == "adversarial"
+
     def options(self) -> dict:
         """The settings that matter for this mode (JSON-serialisable; {} for non_reactive)."""
         if self.is_reactive:
@@ -93,6 +129,8 @@ class EvalMode:
         if self.is_perturbed:
             return {"sigma": self.perturb.sigma, "heading_sigma": self.perturb.heading_sigma_rad,
                     "num_steps": self.perturb.num_steps, "seed": self.seed}
+        if self.is_adversarial:
+            return dataclasses.asdict(self.adversary)
         return {}
 
 

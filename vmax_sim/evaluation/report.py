@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from scenariomax.sources.base import InputError
+from scenariomax.errors import InputError
+from scenariomax.progress import Progress
 from vmax_sim.data import DataConfig
 from vmax_sim.evaluation.evaluate import (
     EvaluationResult,
@@ -55,6 +56,7 @@ TABLE_ROWS: tuple[tuple[str, str], ...] = (
 # rows shown only when a policy's summary has them (reactive mode: vmax_sim.evaluation.mode_rollout)
 MODE_ROWS: tuple[tuple[str, str], ...] = (
     ("Other collisions (non-SDC)", "other_collision"),
+    ("Adversary found", "adversary_found"),
 )
 
 
@@ -118,8 +120,9 @@ def compare_policies(entries: Sequence[str], data: str | None, mode: str = "non_
     """Evaluates every entry (a POLICY_NAMES name or a training run directory) on the same scenarios.
 
     Named policies share one pass over `data` (each batch converted once, then run by every policy);
-    run directories go through `evaluate_run` (default data: the run's held-out split). A tqdm bar
-    counts the batches when `progress`. Returns the columns in the order given. on_batch(column, ids,
+    run directories go through `evaluate_run` (default data: the run's held-out split). When `progress`,
+    stderr shows the scenarios done of the total (scenariomax.progress: a bar on a terminal, plain lines
+    otherwise). Returns the columns in the order given. on_batch(column, ids,
     host batch, host Rollout with trajectories, number of real episodes) is called after every batch of
     every entry (column: its index in `entries`), see `evaluate`.
     """
@@ -145,7 +148,7 @@ def compare_policies(entries: Sequence[str], data: str | None, mode: str = "non_
         start = time.perf_counter()
         hook = None if on_batch is None else functools.partial(on_batch, index)
         result = evaluate_run(entry, data, mode=mode, num_scenarios=num_scenarios, batch_size=batch_size,
-                              on_batch=hook)
+                              on_batch=hook, progress=progress)
         runs[index] = PolicyRun(result.summary["policy"], result, time.perf_counter() - start,
                                 result.summary["num_episodes"])  # includes compilation
     ordered = [runs[i] for i in range(len(entries))]
@@ -161,29 +164,47 @@ def _column_hooks(entries: Sequence[str], named: Sequence[str], on_batch: Callab
 
 def _evaluate_named(names: Sequence[str], config: DataConfig, mode: str, num_scenarios: int | None, seed: int,
                     progress: bool, hooks: Sequence | None = None) -> list[PolicyRun]:
-    total = None if num_scenarios is None else math.ceil(num_scenarios / config.batch_size)
-    batches = _batches(config, config, num_scenarios)
-    if progress:
-        from tqdm import tqdm
-
-        batches = tqdm(batches, total=total, unit="batch", desc="evaluating " + ",".join(names), leave=False,
-                       disable=None)  # None: only on a terminal
     parts: list[list[EvaluationResult]] = [[] for _ in names]
     seconds = [0.0 for _ in names]
     warm = [0 for _ in names]
-    for number, batch in enumerate(batches):
-        prepared = PreparedBatches(batches=(batch,), data_config=config)
-        for i, name in enumerate(names):
-            start = time.perf_counter()
-            part = evaluate(name, prepared, mode, seed=seed * 1_000_003 + number, on_batch=hooks[i] if hooks else None)
-            if number > 0:  # the first batch compiles
-                seconds[i] += time.perf_counter() - start
-                warm[i] += batch[2]
-            parts[i].append(part)
+    total = expected_num_scenarios(config.path, num_scenarios) if progress else None
+    with Progress("evaluating " + ",".join(names), total, "scenarios", enabled=progress) as shown:
+        for number, batch in enumerate(_batches(config, config, num_scenarios)):
+            prepared = PreparedBatches(batches=(batch,), data_config=config)
+            for i, name in enumerate(names):
+                start = time.perf_counter()
+                part = evaluate(name, prepared, mode, seed=seed * 1_000_003 + number,
+                                on_batch=hooks[i] if hooks else None)
+                if number > 0:  # the first batch compiles
+                    seconds[i] += time.perf_counter() - start
+                    warm[i] += batch[2]
+                parts[i].append(part)
+            shown.update(batch[2])  # every policy has run these scenarios
     if not parts[0]:
         raise InputError(f"{config.path}: no scenarios to evaluate")
     return [PolicyRun(name, _merge(name, mode, results), seconds[i] if warm[i] else math.nan, warm[i])
             for i, (name, results) in enumerate(zip(names, parts))]
+
+
+def expected_num_scenarios(path: str | None, num_scenarios: int | None = None) -> int | None:
+    """How many scenarios an evaluation of `path` will run (at most `num_scenarios`), for the progress
+    display: records counted from the TFRecord length headers, data skipped. None when unknown (no path,
+    or a file the reader will report as damaged)."""
+    from scenariomax import list_shard_files
+    from scenariomax.io import count_records
+
+    if not path:
+        return num_scenarios
+    total = 0
+    try:
+        for file in list_shard_files(path):
+            left = None if num_scenarios is None else num_scenarios - total
+            if left == 0:
+                break
+            total += count_records(file, limit=left)
+    except (ValueError, OSError):  # RecordError, a manifest mismatch: the reader reports it in a moment
+        return num_scenarios
+    return total
 
 
 def _merge(name: str, mode: str, parts: Sequence[EvaluationResult]) -> EvaluationResult:
@@ -216,6 +237,10 @@ def format_markdown(runs: Sequence[PolicyRun]) -> str:
     episodes = ", ".join(f"{run.name}: {run.result.summary['num_episodes']}" for run in runs)
     speed = ", ".join(f"{run.name}: {_speed(run)}" for run in runs)
     lines += ["", f"episodes: {episodes}", f"episodes/s (after the first batch, which compiles): {speed}"]
+    unjudged = max(run.result.summary.get("num_unjudged", 0) for run in runs)
+    if unjudged:
+        lines.append(f"left out of the means: {unjudged} episode(s) with no judged step (the SDC's log ends at "
+                     "the start step)")
     return "\n".join(lines)
 
 
@@ -264,3 +289,49 @@ def write_report(out_dir: str | Path, runs: Sequence[PolicyRun]) -> list[Path]:
         path.write_text(text)
         paths.append(path)
     return paths
+
+
+# ----------------------------------------------------------------------------- the output directory's settings
+
+SETTINGS_FILE = "evaluation.json"  # what `vmax-sim view EVAL_DIR` needs to re-run the evaluation's episodes
+
+
+def write_evaluation_settings(out_dir: str | Path, settings: dict) -> Path:
+    """Writes the evaluation's inputs (policies, data, mode and its options, seed, num_objects) beside its tables."""
+    import json
+
+    path = Path(out_dir) / SETTINGS_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(settings, indent=2) + "\n")
+    return path
+
+
+def is_evaluation_dir(path: str | Path) -> bool:
+    return Path(path).is_dir() and (Path(path) / SETTINGS_FILE).is_file()
+
+
+def read_evaluation_settings(eval_dir: str | Path) -> dict:
+    """The settings `write_evaluation_settings` stored (one-line InputError when unreadable)."""
+    import json
+
+    path = Path(eval_dir) / SETTINGS_FILE
+    try:
+        settings = json.loads(path.read_text())
+    except (OSError, ValueError) as error:
+        raise InputError(f"{path}: not a readable evaluation settings file ({error})") from None
+    if not isinstance(settings, dict) or not isinstance(settings.get("policies"), list) or not settings["policies"]:
+        raise InputError(f"{path}: no 'policies' list")
+    return settings
+
+
+def scenario_outcomes(eval_dir: str | Path) -> dict[str, bool]:
+    """scenario id -> failed (not accurate, or a V-Max score of 0) by any policy, from episodes-*.csv."""
+    from vmax_sim.evaluation.gallery import is_failed
+
+    failed: dict[str, bool] = {}
+    for path in sorted(Path(eval_dir).glob("episodes-*.csv")):
+        with open(path, newline="") as handle:
+            for row in csv.DictReader(handle):
+                episode = {key: float(row[key]) for key in ("accurate", "vmax_score") if row.get(key)}
+                failed[row["scenario_id"]] = failed.get(row["scenario_id"], False) or is_failed(episode)
+    return failed

@@ -65,7 +65,7 @@ def run_episode(env, policy: Policy, state: SimulatorState, key: jax.Array, metr
     carry = (state, env.is_truncated(state), first_shared)  # a log ending at the start step: no step judged
     (last, _, _), (per_step, step_valid, terminated) = jax.lax.scan(body, carry, keys)
     episode = episode_metrics(per_step, step_valid, metrics_config)
-    episode["end_of_log"] = end_of_log(state, env)
+    episode.update(episode_extent(state, env, step_valid))
     trajectory = recorded_trajectory(last, first_timestep) if record_trajectory else None
     return Rollout(per_step=per_step, step_valid=step_valid, terminated=terminated, episode=episode,
                    trajectory=trajectory)
@@ -74,6 +74,13 @@ def run_episode(env, policy: Policy, state: SimulatorState, key: jax.Array, metr
 def end_of_log(state: SimulatorState, env) -> jax.Array:
     """1.0 when the logged SDC ends before the episode's last step (the episode stopped there). () float32"""
     return (log_end_timestep(state, env.config) < env.config.last_timestep).astype(jnp.float32)
+
+
+def episode_extent(state: SimulatorState, env, step_valid: jax.Array) -> dict:
+    """Episode values saying how much of the episode was judged: "end_of_log" (see `end_of_log`) and
+    "judged_steps", the number of steps scored (0 when the SDC's log ends at the start step: such an
+    episode says nothing about the policy and is left out of the summary's means). step_valid (S,)."""
+    return {"end_of_log": end_of_log(state, env), "judged_steps": jnp.sum(step_valid).astype(jnp.float32)}
 
 
 def recorded_trajectory(last: SimulatorState, first_timestep: jax.Array) -> dict:

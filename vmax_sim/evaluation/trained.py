@@ -33,7 +33,7 @@ class LoadedPolicy:
 
 def load_trained_policy(run_dir: str | Path, step: int | None = None) -> LoadedPolicy:
     """The policy of a training run directory at its latest (or the given) checkpoint."""
-    from scenariomax.sources.base import InputError
+    from scenariomax.errors import InputError
     from vmax_sim.training.checkpoint import CheckpointStore
     from vmax_sim.training.run import components, load_run_config
 
@@ -75,22 +75,30 @@ def _example_observation(config, env):
 
 
 def _window_points(config) -> int:
-    from vmax_sim.map_index import MapIndexConfig
+    from vmax_sim.map_index.structure import MapIndexConfig
 
     return config.obs.roadgraph_window ** 2 * MapIndexConfig().obs_slots_per_cell
 
 
 def evaluate_run(run_dir: str | Path, data: str | None = None, mode: str = "non_reactive",
-                 num_scenarios: int | None = None, batch_size: int = 8, step: int | None = None, on_batch=None):
+                 num_scenarios: int | None = None, batch_size: int = 8, step: int | None = None, on_batch=None,
+                 progress: bool = False):
     """Evaluates a training run's policy on `data` (default: the run's held-out split), with the run's
-    observation and environment settings."""
+    observation and environment settings. `progress`: the scenarios done of the total on stderr."""
+    import sys
+
+    from scenariomax.progress import Progress
     from vmax_sim.evaluation.evaluate import evaluate
+    from vmax_sim.evaluation.report import expected_num_scenarios
     from vmax_sim.training.run import components, data_config, resolve_data
 
     loaded = load_trained_policy(run_dir, step)
     config = loaded.config
-    path = data or resolve_data(config, print)[1]
-    return evaluate(loaded.policy, data_config(config, path, batch_size=batch_size), mode=mode,
-                    env_config=components(config)[0].env_config,
-                    obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params,
-                    on_batch=on_batch)
+    # notes go to stderr: stdout may be carrying `evaluate --json`
+    path = data or resolve_data(config, lambda line: print(line, file=sys.stderr))[1]
+    total = expected_num_scenarios(path, num_scenarios) if progress else None
+    with Progress(f"evaluating {Path(run_dir).name}", total, "scenarios", enabled=progress) as shown:
+        return evaluate(loaded.policy, data_config(config, path, batch_size=batch_size), mode=mode,
+                        env_config=components(config)[0].env_config,
+                        obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params,
+                        on_batch=on_batch, progress=shown)

@@ -11,15 +11,15 @@ import jax.numpy as jnp
 
 from vmax_sim.geometry.boxes import box_corners
 from vmax_sim.geometry.transforms import wrap_angle
-from vmax_sim.map_index import (
+from vmax_sim.map_index.query import (
     LaneCandidates,
-    MapIndex,
     PathProjection,
     lane_candidates,
     nearest_lane,
     project_on_paths,
     signed_edge_distance,
 )
+from vmax_sim.map_index.structure import MapIndex
 from vmax_sim.metrics.config import DEFAULT_METRICS_CONFIG, MetricsConfig
 from vmax_sim.metrics.objects import at_fault_collisions, overlaps, select_candidates, time_to_collision
 

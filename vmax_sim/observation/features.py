@@ -15,7 +15,8 @@ from scenariomax.schema import (
 )
 from vmax_sim.geometry.boxes import boxes_overlap
 from vmax_sim.geometry.transforms import to_local_points, to_local_vectors
-from vmax_sim.map_index import MapIndex, PathProjection, observation_points, project_on_paths
+from vmax_sim.map_index.query import PathProjection, observation_points, project_on_paths
+from vmax_sim.map_index.structure import MapIndex
 from vmax_sim.metrics.config import DEFAULT_METRICS_CONFIG
 from vmax_sim.observation.config import DEFAULT_OBSERVATION_CONFIG, ObservationConfig
 
@@ -113,7 +114,7 @@ def compact(valid: jnp.ndarray, num: int) -> tuple[jnp.ndarray, jnp.ndarray]:
 
 
 def _point_transform(sdc_xy: jnp.ndarray, sdc_yaw: jnp.ndarray, config: ObservationConfig):
-    """Affine map of MapIndex.obs_features rows into the normalised SDC frame: rows @ m + b."""
+    """Affine map of MapIndex.obs_points rows into the normalised SDC frame: rows @ m + b."""
     cos, sin = jnp.cos(sdc_yaw), jnp.sin(sdc_yaw)
     rot = jnp.array([[cos, -sin], [sin, cos]])  # row vector @ rot = world -> SDC frame
     m = jnp.zeros((8, 8), jnp.float32)

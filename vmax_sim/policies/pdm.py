@@ -37,7 +37,7 @@ from scenariomax.schema import OBJECT_TYPE_PEDESTRIAN
 from vmax_sim.datatypes import SimulatorState
 from vmax_sim.evaluation.policies import Policy
 from vmax_sim.geometry.transforms import to_local_points
-from vmax_sim.map_index import lane_candidates
+from vmax_sim.map_index.query import lane_candidates
 from vmax_sim.metrics import (
     MetricsConfig,
     at_fault_collisions,

@@ -15,7 +15,7 @@ from scenariomax.schema import RG_STOP_SIGN
 from vmax_sim.datatypes import SimulatorState
 from vmax_sim.dynamics.bicycle import DT, heading_speed
 from vmax_sim.geometry.transforms import to_local_points, wrap_angle
-from vmax_sim.map_index import lane_candidates, nearest_lane, project_on_paths
+from vmax_sim.map_index.query import lane_candidates, nearest_lane, project_on_paths
 
 PATH_SPACING_M = 1.0  # spacing of the straight extension past the end of a path (shards: ~1 m)
 NO_PATH_BACK_M = 20.0  # without any SDC path, a straight one starting this far behind the SDC

@@ -12,8 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenariomax.render import draw_scenario
-from scenariomax.scenario import Scenario
+from scenariomax import Scenario, draw_scenario
 
 COLOURS = ("#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
 
