@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from scenariomax.schema import TL_GO, TL_STOP
-from tests.metrics.helpers import LANE_WIDTH, road_index, step_inputs
-from vmax_sim.map_index import lane_candidates
+from tests.metrics.helpers import LANE_WIDTH, road_index, step_inputs, straight_road
+from vmax_sim.map_index import build_map_index, lane_candidates
 from vmax_sim.metrics import (
     MetricsConfig,
     aggregate_episodes,
@@ -146,6 +146,45 @@ def test_driving_direction_thresholds():
     reverse_7m = driving_direction_score(jnp.full(20, -0.7), valid)
     assert [float(s) for s, _ in (forward, reverse_4m, reverse_7m)] == [1.0, 0.5, 0.0]
     assert float(reverse_4m[1]) == pytest.approx(4.0, abs=1e-4)
+
+
+def _road_index_with(oncoming_lane_2=False, extra_lanes=()):
+    """The straight two-lane road, lane 2 running -x when `oncoming_lane_2`, plus extra lanes (id, (n, 2) points)."""
+    r = straight_road()
+    xyz, dirs, types, ids, limit = r["xyz"].copy(), r["dir"].copy(), r["types"], r["ids"], r["speed_limit"]
+    if oncoming_lane_2:
+        xyz[ids == 2] = xyz[ids == 2][::-1]
+        dirs[ids == 2, 0] = -1.0
+    for lane_id, points in extra_lanes:
+        points = np.asarray(points, np.float32)
+        step = np.diff(points, axis=0) / np.linalg.norm(np.diff(points, axis=0), axis=1, keepdims=True)
+        xyz = np.concatenate([xyz, np.pad(points, ((0, 0), (0, 1)))])
+        dirs = np.concatenate([dirs, np.pad(np.concatenate([step, step[-1:]]), ((0, 0), (0, 1)))])
+        types = np.concatenate([types, np.full(len(points), types[ids == 1][0])])
+        ids = np.concatenate([ids, np.full(len(points), lane_id)])
+        limit = np.concatenate([limit, np.full(len(points), 10.0, np.float32)])
+    return build_map_index(xyz, dirs, types, ids, np.ones(len(xyz), bool), None, np.zeros(2), speed_limit=limit)
+
+
+def test_lane_progress_follows_the_lane_the_sdc_is_in(metrics_fn):
+    """nuPlan judges the direction of the lane the ego is in. A junction connector of the crossing traffic
+    over the SDC's lane is not it, even where it is the nearest centreline (the Nocturne expert crossed two
+    such connectors 0-1 m away while 1.1 m off its own lane's centre); an oncoming lane the SDC drives in
+    is, even with a lane of its own direction 3.2 m away; beyond half a lane width of every lane, nothing is."""
+    angle = np.radians(150.0)  # oncoming traffic turning across the SDC's path, through (0, 1)
+    along = np.arange(-20.0, 20.5, 1.0)[:, None]
+    connector = np.array([0.0, 1.0]) + along * np.array([np.cos(angle), np.sin(angle)])
+    crossing = _road_index_with(extra_lanes=[(9, connector)])
+    sdc = ((-2.0, 1.0), (-1.0, 1.0), (0.0, 1.0))  # +x at 1 m per step, 1 m left of lane 1's centre
+    assert float(lane_candidates(crossing, jnp.array([0.0, 1.0])).distance.min()) < 0.01  # the connector is nearest
+    assert float(metrics_fn(crossing, step_inputs(sdc_xy=sdc))["lane_progress"]) == pytest.approx(1.0, abs=1e-4)
+
+    oncoming = _road_index_with(oncoming_lane_2=True)
+    wrong_way = ((-2.0, 3.2), (-1.0, 3.2), (0.0, 3.2))  # +x inside lane 2, which runs -x
+    assert float(metrics_fn(oncoming, step_inputs(sdc_xy=wrong_way))["lane_progress"]) == pytest.approx(-1.0, abs=1e-4)
+
+    outside = ((-2.0, -2.2), (-1.0, -2.2), (0.0, -2.2))  # 2.2 m right of lane 1, the nearest centreline
+    assert float(metrics_fn(oncoming, step_inputs(sdc_xy=outside))["lane_progress"]) == 0.0
 
 
 @pytest.mark.parametrize("seconds, expected", [(0.0, 1.0), (3.4, 1.0), (3.5, 0.5), (5.7, 0.5), (5.8, 0.0)])

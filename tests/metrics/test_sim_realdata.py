@@ -82,3 +82,25 @@ def test_real_island_tip_expert_has_no_offroad_step(island_tip_shards):
     assert result.scenario_ids == ("2a1e44d405a6833f",)
     assert float(result.episodes["offroad"][0]) == 0.0
     assert float(result.episodes["accurate"][0]) == 1.0
+
+
+def test_real_nocturne_expert_drives_nowhere_against_its_lane(tmp_path):
+    """Nocturne's tfrecord-00358-of-01000_65: the logged SDC goes straight through a junction in lane 115, 1.1-1.2 m
+    off its centre, over connectors 112 and 117 of the crossing traffic (0-1 m away at steps 24-40). Judged against
+    the nearest centreline, the expert drove 3.2 m against the lane in 1 s (driving direction 0.5, V-Max 0.421)."""
+    from scenariomax.enrich.transform import make_transform
+    from scenariomax.pipeline import ConvertSettings, convert
+    from scenariomax.schema import Sizes
+    from scenariomax.sources.registry import make_source
+    from tests.conftest import realdata_file
+    from vmax_sim.evaluation import evaluate
+
+    source = make_source("gpudrive", src=str(realdata_file("nocturne/example_scenario.json")), sizes=Sizes())
+    transform, transform_settings = make_transform()
+    result = convert(source, ConvertSettings(out=tmp_path, workers=1, progress=False, transform=transform,
+                                             transform_settings=transform_settings))
+    assert result.ok and result.num_scenarios == 1, result.failures
+    run = evaluate("expert", str(tmp_path), batch_size=1)
+    assert run.scenario_ids == ("tfrecord-00358-of-01000_65",)
+    assert float(run.episodes["distance_against_lane"][0]) < 0.1
+    assert float(run.episodes["driving_direction"][0]) == 1.0

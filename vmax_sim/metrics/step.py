@@ -158,6 +158,16 @@ def red_light_violation(front_before: jnp.ndarray, front_now: jnp.ndarray, lane_
     return jnp.any(is_red & crossed & (lane_id >= 0))
 
 
+def containing_lane(lanes: LaneCandidates, yaw: jnp.ndarray, half_width: float) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """The lane a point is in, as nuPlan puts the ego in a lane polygon: only lanes whose centreline is within
+    `half_width` of the point contain it; where several do (junction connectors crossing the lane the agent
+    follows), `nearest_lane` picks the one it follows. A farther lane never wins on heading, so an agent inside
+    the oncoming lane is in that lane. -> (index into the candidates () int32, found () bool).
+    """
+    inside = lanes.distance <= half_width  # invalid candidates are at inf
+    return nearest_lane(lanes.replace(distance=jnp.where(inside, lanes.distance, jnp.inf)), yaw), jnp.any(inside)
+
+
 def step_metrics(map_index: MapIndex, inputs: StepInputs, config: MetricsConfig = DEFAULT_METRICS_CONFIG,
                  shared: SharedQueries | None = None) -> dict[str, jnp.ndarray]:
     """All per-step metrics of the SDC at one step. -> dict of () float32 arrays.
@@ -187,11 +197,11 @@ def step_metrics(map_index: MapIndex, inputs: StepInputs, config: MetricsConfig 
     lane_found = lanes.distance[lane_k] < config.lane_match_distance
     lane_id = jnp.where(lane_found, lanes.lane_id[lane_k], -1)
     speed_limit = jnp.where(lane_found, lanes.speed_limit[lane_k], -1.0)
-    # driving direction judges against the nearest lane regardless of heading
-    plain_k = jnp.argmin(lanes.distance)
-    lane_progress = jnp.where(lanes.distance[plain_k] < config.lane_match_distance,
-                              (inputs.sdc_xy[-1] - inputs.sdc_xy[-2])
-                              @ jnp.stack([lanes.dir_x[plain_k], lanes.dir_y[plain_k]]), 0.0)
+    # driving direction (nuPlan): progress along the lane the SDC's centre is in, none when it is in no lane. A
+    # connector crossing its lane in a junction is not its lane; an oncoming lane it drives in is (the only one)
+    own_k, in_lane = containing_lane(lanes, yaw, config.lane_half_width)
+    lane_progress = jnp.where(in_lane, (inputs.sdc_xy[-1] - inputs.sdc_xy[-2])
+                              @ jnp.stack([lanes.dir_x[own_k], lanes.dir_y[own_k]]), 0.0)
     multiple = on_multiple_lanes(lanes, xy, yaw, size[1], config.lane_half_width, config.lane_max_angle_deg)
 
     fault = at_fault_collisions(sdc_box, motion["speed"], boxes, jnp.linalg.norm(vels, axis=-1), colliding,
