@@ -98,6 +98,7 @@ class ConversionResult:
     shards: tuple[str, ...]
     elapsed_s: float
     failures: tuple[dict, ...]
+    notes: tuple[dict, ...] = ()  # the manifest's {"unit", "scenario", "notes"}: what was repaired or is doubtful
 
     @property
     def ok(self) -> bool:
@@ -113,7 +114,17 @@ class ConversionResult:
             ("shards", str(len(self.shards))),
             ("elapsed", f"{self.elapsed_s:.1f} s"),
             ("throughput", f"{rate:.1f} scenarios/s"),
-        ]
+        ] + ([("notes", notes_summary(self.notes))] if self.notes else [])
+
+
+def notes_summary(notes: tuple[dict, ...] | list[dict]) -> str:
+    """`N scenarios (note 3, other 1; see manifest.json)`: how many scenarios carry each kind of note."""
+    counts: dict[str, int] = {}
+    for entry in notes:
+        for key in entry["notes"]:
+            counts[key] = counts.get(key, 0) + 1
+    kinds = ", ".join(f"{key} {count}" for key, count in sorted(counts.items()))
+    return f"{len(notes)} scenario{'s' * (len(notes) != 1)} ({kinds}; see manifest.json)"
 
 
 def _one_line(error: BaseException) -> str:
@@ -647,6 +658,7 @@ def _convert_into(out: Path, source: Source, settings: ConvertSettings, units: l
         out=out, num_units=len(units), num_units_skipped=skipped,
         num_scenarios=manifest["counts"]["scenarios"], num_failures=len(manifest["failures"]),
         shards=tuple(shards), elapsed_s=time.perf_counter() - start, failures=tuple(manifest["failures"]),
+        notes=tuple(manifest.get("notes", [])),
     )
 
 

@@ -14,6 +14,7 @@ from scenariomax.enrich.budget import fit_to_budget
 from scenariomax.io.example import Example, ExampleError
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
+from scenariomax.sources.base import MANIFEST_NOTES
 from scenariomax.sources.womd.convert import SOURCE_NAME, ScenarioBuildError
 from scenariomax.sources.womd.windows import wrap_angle
 
@@ -43,6 +44,11 @@ def tf_example_to_scenario(data: bytes, sizes: Sizes) -> Scenario:
     if int(scenario.is_sdc.sum()) != 1:
         raise ScenarioBuildError(f"tf.Example marks {int(scenario.is_sdc.sum())} SDCs, expected 1")
     keep = np.flatnonzero(scenario.roadgraph_valid)
+    if keep.size and keep.size == scenario.roadgraph_valid.size:
+        # WOMD cut this map to the tf.Example's capacity: lanes (junction connectors first) may be missing, and the
+        # metrics judge the SDC against the lanes left. The Scenario protos hold the whole map.
+        notes = {"tf_example_roadgraph_full_points": int(keep.size)}
+        scenario = scenario.replace(metadata={**scenario.metadata, MANIFEST_NOTES: notes})
     changes = {name: getattr(scenario, name)[keep] for name in _POINT_FIELDS}
     changes["bbox_yaw"] = np.where(scenario.valid, wrap_angle(scenario.bbox_yaw), -1.0).astype(np.float32)
     changes["vel_yaw"] = np.where(scenario.valid, wrap_angle(scenario.vel_yaw), -1.0).astype(np.float32)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import collections
+import json
 
 import numpy as np
 import pytest
@@ -151,3 +152,20 @@ def test_real_tf_example(tmp_path):
     assert (raw["state/id"] != -1).sum() == scenario.num_objects or scenario.num_objects == 128
     forced = list(WomdSource(str(path), womd_format="tf_example").read_unit(str(path)))
     assert forced[0].equals(scenario)
+
+
+def test_a_tf_example_with_a_full_roadgraph_is_noted_in_the_manifest(tmp_path, scenario_path):
+    """The real tf.Example holds 20,000 of 20,000 roadgraph points: WOMD cut its map (junction connectors the
+    SDC drove on are gone), so the conversion says so in the summary and the manifest; the proto does not."""
+    from click.testing import CliRunner
+
+    from vmax_cli.scenariomax_cli import main
+
+    result = CliRunner().invoke(main, ["convert", "--dataset", "womd", "--src", str(realdata_file(EXAMPLE_FILE)),
+                                       "--out", str(tmp_path / "example")])
+    assert result.exit_code == 0, result.output
+    assert "notes              1 scenario (tf_example_roadgraph_full_points 1" in result.output
+    manifest = json.loads((tmp_path / "example" / "manifest.json").read_text())
+    assert [n["notes"].get("tf_example_roadgraph_full_points") for n in manifest["notes"]] == [20000]
+    proto = list(WomdSource(str(scenario_path)).read_unit(str(scenario_path)))[0]
+    assert "tf_example_roadgraph_full_points" not in proto.metadata.get("manifest_notes", {})
