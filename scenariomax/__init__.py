@@ -19,7 +19,14 @@ from scenariomax.codec import BudgetError, SchemaError, decode_scenario, encode_
 from scenariomax.errors import InputError
 from scenariomax.scenario import Scenario
 from scenariomax.schema import ShardSchema, Sizes, default_sizes, load_schema
-from scenariomax.shards import ShardReadError, list_shard_files, read_shards, write_shards
+from scenariomax.shards import (
+    ShardReadError,
+    ShardRecord,
+    iter_shard_records,
+    list_shard_files,
+    read_shards,
+    write_shards,
+)
 
 __version__ = "0.1.0"
 
@@ -67,6 +74,7 @@ def __dir__() -> list[str]:
 __all__ = [
     # shards: read, write, list, and the in-memory scenario
     "Scenario", "read_shards", "write_shards", "list_shard_files", "encode_scenario", "decode_scenario",
+    "iter_shard_records", "ShardRecord",
     # the schema (module and sizes)
     "schema", "Sizes", "ShardSchema", "load_schema", "default_sizes",
     # conversion, enrichment and the synthetic source

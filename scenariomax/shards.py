@@ -9,15 +9,17 @@ conversions; `write_shards` is the small sequential writer.
 
 from __future__ import annotations
 
+import dataclasses
 import glob
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
 from scenariomax.codec import SchemaError, decode_scenario, encode_scenario
 from scenariomax.errors import InputError
 from scenariomax.io.example import ExampleError
-from scenariomax.io.tfrecord import RecordError, TFRecordWriter, iter_records
+from scenariomax.io.tfrecord import RecordError, TFRecordWriter, iter_record_spans, iter_records, read_record_at
 from scenariomax.manifest import (
     COMPLETE,
     MANIFEST,
@@ -91,20 +93,52 @@ def list_shard_files(path: str | os.PathLike) -> list[Path]:
     return _checked_files(path)[0]
 
 
-def iter_raw_records(path: str | os.PathLike) -> Iterator[tuple[Path, int, bytes]]:
-    """Yields (file, record index, bytes) for every record under `path`; ShardReadError when a shard holds
-    another number of records than its manifest lists."""
+def _counted_records(path: str | os.PathLike,
+                     records_of: Callable[[Path], Iterable]) -> Iterator[tuple[Path, int, Any]]:
+    """(file, record index, item) for every item `records_of(file)` yields under `path`, the record counts
+    compared with the manifest's; ShardReadError for a damaged record or a count that disagrees."""
     files, expected = _checked_files(path)
     for file in files:
         count = 0
         try:
-            for data in iter_records(file):
-                yield file, count, data
+            for item in records_of(file):
+                yield file, count, item
                 count += 1
         except RecordError as error:
             raise ShardReadError(str(error)) from None
         if file in expected and count != expected[file]:
             raise ShardReadError(record_count_message(file, count, expected[file]))
+
+
+def iter_raw_records(path: str | os.PathLike) -> Iterator[tuple[Path, int, bytes]]:
+    """Yields (file, record index, bytes) for every record under `path`; ShardReadError when a shard holds
+    another number of records than its manifest lists."""
+    yield from _counted_records(path, iter_records)
+
+
+@dataclasses.dataclass(frozen=True)
+class ShardRecord:
+    """Where one record of a shard lies, to read later: a shuffle buffer of these holds a few bytes per record
+    where one of Scenarios holds ~2 MB."""
+    file: Path
+    index: int  # the record's position in its file
+    offset: int  # byte offset of its header
+    length: int  # bytes of its payload
+
+    def read(self, sizes: Sizes | None = None) -> Scenario:
+        """The record's Scenario (its data CRC checked); ShardReadError when it is damaged or the file changed."""
+        try:
+            data = read_record_at(self.file, self.offset, self.length, self.index)
+        except RecordError as error:
+            raise ShardReadError(str(error)) from None
+        return decode_record(data, self.file, self.index, sizes)
+
+
+def iter_shard_records(path: str | os.PathLike) -> Iterator[ShardRecord]:
+    """`read_shards` without the reading: where every record under `path` lies, from the length headers only
+    (records are decoded by `ShardRecord.read`), with the same manifest checks."""
+    for file, index, (offset, length) in _counted_records(path, iter_record_spans):
+        yield ShardRecord(file, index, offset, length)
 
 
 def read_shards(path: str | os.PathLike, sizes: Sizes | None = None) -> Iterator[Scenario]:

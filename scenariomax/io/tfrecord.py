@@ -130,6 +130,43 @@ def count_records(path: str | os.PathLike, limit: int | None = None) -> int:
     return count
 
 
+def iter_record_spans(path: str | os.PathLike) -> Iterator[tuple[int, int]]:
+    """(byte offset, data length) of every record in a TFRecord file, from the length headers only (the data is
+    skipped, so a record can be read later with `read_record_at`). RecordError like `iter_records` for a
+    damaged header or a record cut short by the end of the file."""
+    name = str(path)
+    index, offset = 0, 0
+    with open(path, "rb") as stream:
+        size = os.fstat(stream.fileno()).st_size
+        while True:
+            length = _read_length(stream, name, index, offset, check_crc=True)
+            if length is None:
+                return
+            end = offset + _HEADER.size + length + _FOOTER.size
+            if end > size:
+                raise _record_error(name, f"truncated record at byte {offset} (expected {length} bytes of data)")
+            yield offset, length
+            offset, index = end, index + 1
+            stream.seek(offset)
+
+
+def read_record_at(path: str | os.PathLike, offset: int, length: int, index: int = 0) -> bytes:
+    """The payload of the record whose header is at byte `offset` (a span of `iter_record_spans`), its data CRC
+    checked; RecordError when the file changed since the span was taken."""
+    name = str(path)
+    with open(path, "rb") as stream:
+        stream.seek(offset)
+        if record_length(stream.read(_HEADER.size), name, max(index, 1), offset) != length:
+            raise _record_error(name, f"record {index} at byte {offset} changed since the file was scanned")
+        data = stream.read(length)
+        footer = stream.read(_FOOTER.size)
+    if len(data) < length or len(footer) < _FOOTER.size:
+        raise _record_error(name, f"truncated record at byte {offset} (expected {length} bytes of data)")
+    if masked_crc32c(data) != _FOOTER.unpack(footer)[0]:
+        raise _record_error(name, f"corrupt record {index}: data CRC mismatch at byte {offset}")
+    return data
+
+
 class TFRecordWriter:
     """Writes framed records to a file. Use as a context manager."""
 

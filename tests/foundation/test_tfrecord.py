@@ -10,8 +10,10 @@ from scenariomax.io.tfrecord import (
     TFRecordWriter,
     count_records,
     frame_record,
+    iter_record_spans,
     iter_records,
     masked_crc32c,
+    read_record_at,
 )
 
 
@@ -117,6 +119,31 @@ def test_count_records_reads_only_the_headers(tmp_path):
     (tmp_path / "text.tfrecord").write_text("hello, world: not records")
     with pytest.raises(RecordError, match="not a TFRecord file"):
         count_records(tmp_path / "text.tfrecord")
+
+
+def test_record_spans_read_back_every_payload_and_notice_a_changed_file(tmp_path):
+    payloads = [bytes([i]) * (100 * i) for i in range(6)]
+    path = tmp_path / "s.tfrecord"
+    with TFRecordWriter(path) as writer:
+        for payload in payloads:
+            writer.write(payload)
+    spans = list(iter_record_spans(path))
+    assert [length for _, length in spans] == [len(p) for p in payloads]
+    assert [read_record_at(path, offset, length, i) for i, (offset, length) in enumerate(spans)][::-1] == payloads[::-1]
+    data = bytearray(path.read_bytes())
+    data[spans[3][0] + 14] ^= 0xFF  # a data byte of record 3
+    path.write_bytes(bytes(data))
+    with pytest.raises(RecordError, match="corrupt record 3: data CRC mismatch"):
+        read_record_at(path, *spans[3], 3)
+    path.write_bytes(frame_record(b"other") + frame_record(b"records"))  # replaced: record 1 is elsewhere now
+    with pytest.raises(RecordError, match=r"s\.tfrecord: corrupt record 1: length CRC mismatch at byte 16"):
+        read_record_at(path, *spans[1], 1)
+    path.write_bytes(frame_record(b"x" * 5) + frame_record(b"y" * 2))  # same place, another length
+    with pytest.raises(RecordError, match="record 1 at byte 21 changed since the file was scanned"):
+        read_record_at(path, 21, 100, 1)
+    path.write_bytes(frame_record(b"hello") + frame_record(b"world")[:-3])
+    with pytest.raises(RecordError, match=r"truncated record at byte 21"):
+        list(iter_record_spans(path))
 
 
 def test_a_raw_womd_scenario_proto_is_told_apart_from_a_tf_example():

@@ -103,6 +103,17 @@ def test_shuffling_is_seeded_and_repeat_goes_on(shard_dir):
     assert first[:6] != [f"straight-{i}" for i in range(6)]
 
 
+def test_the_shuffle_buffer_holds_record_locations_not_scenarios(shard_dir, monkeypatch):
+    """A 256-scenario shuffle buffer used to hold 256 decoded scenarios (~0.5 GB at full budget) before the
+    first batch; it now decodes a scenario only when it leaves the buffer."""
+    decoded = []
+    read = scenariomax.ShardRecord.read
+    monkeypatch.setattr(scenariomax.ShardRecord, "read", lambda self, *a: decoded.append(self) or read(self, *a))
+    stream = iter_scenarios(small_config(shard_dir, shuffle_seed=3, shuffle_buffer=256, repeat=True))
+    first = next(stream)
+    assert len(decoded) == 1 and first.scenario_id == f"straight-{decoded[0].index}"
+
+
 def test_remainder_is_dropped_or_kept(shard_dir):
     dropped = list(make_data_iterator(small_config(shard_dir, batch_size=4)))
     kept = list(make_data_iterator(small_config(shard_dir, batch_size=4, drop_remainder=False)))

@@ -19,7 +19,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from scenariomax import Scenario, list_shard_files, read_shards
+from scenariomax import Scenario, ShardRecord, iter_shard_records, list_shard_files
 from scenariomax.errors import InputError
 from vmax_sim.data.config import DataConfig
 from vmax_sim.data.convert import scenario_to_numpy_state, stack_states
@@ -28,6 +28,7 @@ from vmax_sim.datatypes import SimulatorState
 
 _END = object()
 IndexedScenario = tuple[Scenario, IndexSource | None]  # a scenario and where its map index comes from (None: built)
+IndexedRecord = tuple[ShardRecord, IndexSource | None]  # the same before the record is read
 
 
 def _shard_files(path: str) -> list[Path]:
@@ -37,17 +38,23 @@ def _shard_files(path: str) -> list[Path]:
         raise InputError(str(error)) from None
 
 
-def _scenarios_once(files: list[Path], rng: np.random.Generator | None,
-                    cache: MapIndexCache | None) -> Iterator[IndexedScenario]:
+def _records_once(files: list[Path], rng: np.random.Generator | None,
+                  cache: MapIndexCache | None) -> Iterator[IndexedRecord]:
     order = rng.permutation(len(files)) if rng is not None else range(len(files))
     for index in order:
         rows = cache.shard_rows(files[index]) if cache is not None else None
-        for row, scenario in enumerate(read_shards(files[index])):
-            yield scenario, rows.source(row) if rows is not None else None
+        for record in iter_shard_records(files[index]):
+            yield record, rows.source(record.index) if rows is not None else None
+
+
+def _read(item: IndexedRecord) -> IndexedScenario:
+    record, source = item
+    return record.read(), source
 
 
 def _shuffled(scenarios: Iterable, rng: np.random.Generator, buffer_size: int) -> Iterator:
-    """Reservoir-style shuffle buffer: memory is `buffer_size` scenarios, whatever the data size."""
+    """Reservoir-style shuffle buffer of record locations (a few hundred bytes each, where a decoded scenario
+    is ~2 MB): memory does not grow with `buffer_size` or the data size."""
     buffer: list = []
     for scenario in scenarios:
         if len(buffer) < buffer_size:
@@ -65,12 +72,12 @@ def _indexed_scenarios(config: DataConfig, cache: MapIndexCache | None) -> Itera
     rng = np.random.default_rng(config.shuffle_seed) if config.shuffle_seed is not None else None
     while True:
         count = 0
-        stream = _scenarios_once(files, rng, cache)
+        stream = _records_once(files, rng, cache)
         if rng is not None and config.shuffle_buffer > 1:
             stream = _shuffled(stream, rng, config.shuffle_buffer)
-        for scenario in stream:
+        for item in stream:
             count += 1
-            yield scenario
+            yield _read(item)
         if count == 0:
             raise InputError(f"{config.path}: the shard files hold no scenarios")
         if not config.repeat:
@@ -214,10 +221,10 @@ def load_batch(config: DataConfig, num_scenarios: int | None = None) -> Simulato
     """The first `num_scenarios` scenarios of `config.path` (all when None) as one device batch."""
     states = []
     files = _shard_files(config.path)
-    for item in _scenarios_once(files, None, open_map_index_cache(config)):
+    for item in _records_once(files, None, open_map_index_cache(config)):
         if num_scenarios is not None and len(states) >= num_scenarios:
             break
-        states.append(indexed_to_numpy_state(item, config))
+        states.append(indexed_to_numpy_state(_read(item), config))
     if not states:
         raise InputError(f"{config.path}: the shard files hold no scenarios")
     return jax.device_put(stack_states(states))
