@@ -40,12 +40,15 @@ def test_clean_womd_is_not_repaired(relative):
     assert len(found) == 1 and noted(found) == {}
 
 
-def test_womd_through_the_pipeline_has_no_notes(tmp_path):
+def test_womd_through_the_pipeline_needs_no_repair(tmp_path):
+    """Clean WOMD logs get no sanity repair; the only note is the tf.Example's cut map (its 20,000-point
+    roadgraph is full), not a repair."""
     realdata_file("womd/motion_data_one_scenario.tfrecord")
     source = make_source("womd", src=str(realdata_file("womd")))
     result = convert(source, ConvertSettings(out=tmp_path / "womd", workers=1, progress=False))
     assert result.ok and result.num_scenarios == 2
-    assert json.loads((tmp_path / "womd" / "manifest.json").read_text())["notes"] == []
+    notes = json.loads((tmp_path / "womd" / "manifest.json").read_text())["notes"]
+    assert [entry["notes"] for entry in notes] == [{"tf_example_roadgraph_full_points": 20000}]
 
 
 def test_av2_velocities_that_lag_the_positions_are_derived():

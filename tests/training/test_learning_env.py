@@ -21,15 +21,15 @@ def pool():
     return scenarios_to_batch(scenarios, small_data_config(""))
 
 
-def run(policy, steps: int, batch_size: int = 2):
+def run(policy, steps: int, batch_size: int = 2, env: LearningEnv = ENV):
     """Steps `batch_size` episodes with policy(state) -> (B, A); returns the stacked StepOutputs."""
     scenarios = pool()
-    state = ENV.reset(scenarios, batch_size, jax.random.PRNGKey(0))
+    state = env.reset(scenarios, batch_size, jax.random.PRNGKey(0))
 
     @jax.jit
     def roll(state):
         def body(state, _):
-            state, out = ENV.step(state, policy(state), scenarios)
+            state, out = env.step(state, policy(state), scenarios)
             return state, (out, state.sim.object_metadata.ids[:, 1])
         return jax.lax.scan(body, state, None, length=steps)
 
@@ -57,6 +57,28 @@ def test_collision_terminates_with_the_safety_penalty():
     assert float(out.reward[step, 1]) <= -1.0 + 0.2 + 1e-6  # collision -1 (progress may still add 0.2)
     assert bool(out.episode_flags["overlap"][step, 1]) and not bool(out.truncated[step, 1])
     assert not bool(jnp.any(out.terminated[:, 0]))  # the cruise episode keeps going
+
+
+def test_a_repeated_action_is_held_for_k_steps_and_stops_at_the_episode_end():
+    """action_repeat 4: one transition is 4 simulator steps (timestep +4, the rewards of the 4 steps summed);
+    the 80-step episode takes 20 transitions; a crash within the 4 steps ends the transition there."""
+    repeat = LearningEnv(EnvConfig(max_num_objects=8), action_repeat=4)
+    hold = lambda state: jnp.zeros((2, 2)) + repeat.core.dynamics.normalize(jnp.zeros(2))  # noqa: E731
+    scenarios = pool()
+    state = repeat.reset(scenarios, 2, jax.random.PRNGKey(0))
+    after, out = jax.jit(lambda s: repeat.step(s, hold(s), scenarios))(state)
+    np.testing.assert_array_equal(np.asarray(after.sim.timestep - state.sim.timestep), [4, 4])
+    single, _ = run(hold, 4)  # the same action, one simulator step per transition
+    np.testing.assert_allclose(np.asarray(out.reward), np.asarray(single.reward.sum(axis=0)), atol=1e-5)
+
+    cruise, _ = run(repeat.expert_action, 20, env=repeat)
+    assert cruise.truncated[:-1, 0].sum() == 0 and bool(cruise.truncated[-1, 0])  # 20 x 4 = the 80 steps
+    crash, _ = run(hold, 15, env=repeat)
+    hit = np.flatnonzero(np.asarray(crash.terminated[:, 1]))
+    single_hit = np.flatnonzero(np.asarray(run(hold, 60)[0].terminated[:, 1]))[0]
+    assert hit.size >= 1 and hit[0] == single_hit // 4  # the transition holding the crash step ends the episode
+    assert bool(crash.episode_flags["overlap"][hit[0], 1])
+    assert float(crash.reward[hit[0], 1]) <= -1.0 + 4 * 0.2 + 1e-6
 
 
 def test_finished_episodes_restart_on_the_next_pool_scenarios():

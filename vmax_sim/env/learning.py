@@ -82,6 +82,10 @@ class LearningEnv:
     # compute the log-following action at every step (BC labels; BC+SAC's imitation term); learners that
     # never read StepOutput.expert_action skip that work and get zeros
     expert_labels: bool = True
+    # simulator steps each policy action is held for (one transition; rewards summed, an episode that ends
+    # within them stops there): at 10 Hz one action barely changes the future, so a critic learns little
+    # about it (docs/learning.md)
+    action_repeat: int = 1
 
     def __post_init__(self) -> None:
         if self.env_config.controlled != "sdc":
@@ -91,6 +95,8 @@ class LearningEnv:
             raise ValueError(f"EnvConfig.terminate_on: unknown {sorted(unknown)}; choose among "
                              f"{sorted(TERMINATION_METRICS)}")
         check_reward_config(self.reward_config)
+        if self.action_repeat < 1:
+            raise ValueError(f"action_repeat must be at least 1, got {self.action_repeat}")
         config = dataclasses.replace(self.env_config, normalize_actions=True)  # policies act in [-1, 1]
         object.__setattr__(self, "env_config", config)
         object.__setattr__(self, "core", Environment(config))
@@ -123,17 +129,46 @@ class LearningEnv:
         action = dynamics.expert_step(row(sim.current_sim_trajectory), row(sim.next_log_trajectory))[0]
         return jnp.clip(dynamics.normalize(action), -1.0, 1.0)
 
-    def _advance(self, sim: SimulatorState, arcs: jax.Array, action: jax.Array, key: jax.Array):
-        """Step one scene with the SDC's action (A,); metrics, termination, truncation, next observation."""
+    def _move(self, sim: SimulatorState, arcs: jax.Array, action: jax.Array):
+        """One simulator step of one scene with the SDC's action (A,): state, queries, metrics, termination,
+        truncation."""
         sim = self.core.step(sim, sdc_action(sim, action))
         shared, metrics = self._measure(sim, arcs)
         terminated = jnp.zeros((), bool)
         for name in self.env_config.terminate_on:
             terminated = terminated | (metrics[TERMINATION_METRICS[name]] > 0.5)
         truncated = self.core.is_truncated(sim) & ~terminated
+        return sim, shared, metrics, terminated, truncated
+
+    def _observe(self, sim: SimulatorState, shared: SharedQueries, key: jax.Array) -> Observation:
         noise_key = key if _has_noise(self.obs_config) else None
-        observation = sdc_observation(sim, shared, self.obs_config, noise_key)
-        return sim, shared, metrics, terminated, truncated, observation
+        return sdc_observation(sim, shared, self.obs_config, noise_key)
+
+    def _advance(self, sim: SimulatorState, arcs: jax.Array, metrics: dict, action: jax.Array, key: jax.Array):
+        """One policy step of one scene: the action held for `action_repeat` simulator steps, or until the
+        episode ends -> (state, queries, metrics, reward summed, terminated, truncated, flags seen, observation).
+        `metrics` are the current step's (the progress term compares with them)."""
+        sim, shared, new_metrics, terminated, truncated = self._move(sim, arcs, action)
+        reward = compute_reward(new_metrics, metrics, self.reward_config, self.metrics_config)
+        flags = {name: new_metrics[name] > 0.5 for name in EPISODE_FLAGS}
+        parts = (sim, shared, new_metrics, reward, terminated, truncated, flags)
+        for _ in range(self.action_repeat - 1):  # unrolled: repeats are few
+            parts = self._repeat_once(parts, arcs, action)
+        sim, shared, metrics, reward, terminated, truncated, flags = parts
+        return sim, shared, metrics, reward, terminated, truncated, flags, self._observe(sim, shared, key)
+
+    def _repeat_once(self, parts, arcs: jax.Array, action: jax.Array):
+        """One simulator step of a held action; a scene whose episode already ended keeps its state."""
+        sim, shared, metrics, reward, terminated, truncated, flags = parts
+        running = ~(terminated | truncated)
+        moved = self._move(sim, arcs, action)
+        new_sim, new_shared, new_metrics, new_terminated, new_truncated = moved
+        keep = lambda new, old: jax.tree.map(lambda n, o: jnp.where(running, n, o), new, old)  # noqa: E731
+        reward = reward + jnp.where(running, compute_reward(new_metrics, metrics, self.reward_config,
+                                                            self.metrics_config), 0.0)
+        flags = {name: flag | (running & (new_metrics[name] > 0.5)) for name, flag in flags.items()}
+        return (keep(new_sim, sim), keep(new_shared, shared), keep(new_metrics, metrics), reward,
+                terminated | (running & new_terminated), truncated | (running & new_truncated), flags)
 
     # ------------------------------------------------------------------ batched API
 
@@ -159,13 +194,12 @@ class LearningEnv:
         action = jnp.clip(action, -1.0, 1.0)
         expert = self.expert_action(state) if self.expert_labels else jnp.zeros_like(action)
         key, step_key = jax.random.split(state.key)
-        sim, shared, metrics, terminated, truncated, next_obs = jax.vmap(self._advance)(
-            state.sim, state.arcs, action, jax.random.split(step_key, batch_size))
-        reward = compute_reward(metrics, state.metrics, self.reward_config, self.metrics_config)
+        sim, shared, metrics, reward, terminated, truncated, seen, next_obs = jax.vmap(self._advance)(
+            state.sim, state.arcs, state.metrics, action, jax.random.split(step_key, batch_size))
         done = terminated | truncated
         episode_return = state.episode_return + reward
         episode_length = state.episode_length + 1
-        flags = {name: state.episode_flags[name] | (metrics[name] > 0.5) for name in EPISODE_FLAGS}
+        flags = {name: state.episode_flags[name] | seen[name] for name in EPISODE_FLAGS}
         output = StepOutput(
             observation=state.observation, action=action, expert_action=expert, reward=reward,
             terminated=terminated, truncated=truncated, next_observation=next_obs,

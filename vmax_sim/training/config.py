@@ -57,11 +57,14 @@ class LoopConfig:
     keep_checkpoints: int = 2
     save_buffer: bool = True  # the replay buffer travels in checkpoints (exact resume of off-policy runs)
     buffer_dtype: str = "float16"  # storage of floating-point observation leaves in the replay buffer
+    # simulator steps each policy action is held for during training (one transition, rewards summed);
+    # env steps count policy actions. Evaluation acts every simulator step.
+    action_repeat: int = 1
     seed: int = 0
 
     def __post_init__(self) -> None:
         for name in ("total_env_steps", "chunk_steps", "pool_size", "eval_scenarios", "eval_batch_size",
-                     "checkpoint_every", "keep_checkpoints"):
+                     "checkpoint_every", "keep_checkpoints", "action_repeat"):
             if getattr(self, name) is not None and getattr(self, name) < 1:
                 raise ValueError(f"train.{name} must be at least 1, got {getattr(self, name)}")
         if self.pool_refresh is not None and (self.pool_refresh < 0 or self.pool_refresh > self.pool_size):

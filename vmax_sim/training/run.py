@@ -71,7 +71,8 @@ def build_learner(config: TrainConfig, env: LearningEnv):
 @functools.lru_cache(maxsize=8)
 def components(config: TrainConfig):
     """(LearningEnv, Learner) of a configuration, built once per process so jitted functions are reused."""
-    env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.algo in EXPERT_LABELLED)
+    env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.algo in EXPERT_LABELLED,
+                      action_repeat=config.train.action_repeat)
     return env, build_learner(config, env)
 
 
