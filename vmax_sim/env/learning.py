@@ -167,7 +167,10 @@ class LearningEnv:
         reward = reward + jnp.where(running, compute_reward(new_metrics, metrics, self.reward_config,
                                                             self.metrics_config), 0.0)
         flags = {name: flag | (running & (new_metrics[name] > 0.5)) for name, flag in flags.items()}
-        return (keep(new_sim, sim), keep(new_shared, shared), keep(new_metrics, metrics), reward,
+        # a step changes only the simulated trajectory and the timestep: the log and the map index stay as they are
+        sim = sim.replace(sim_trajectory=keep(new_sim.sim_trajectory, sim.sim_trajectory),
+                          timestep=keep(new_sim.timestep, sim.timestep))
+        return (sim, keep(new_shared, shared), keep(new_metrics, metrics), reward,
                 terminated | (running & new_terminated), truncated | (running & new_truncated), flags)
 
     # ------------------------------------------------------------------ batched API
