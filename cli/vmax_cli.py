@@ -91,7 +91,8 @@ def _env_kinds(choice: str) -> tuple[str, ...]:
 @click.option("--out", default=None, type=click.Path(file_okay=False),
               help="Run directory (default: runs/<preset>-<time>).")
 @click.option("--resume", "resume_dir", default=None, type=click.Path(file_okay=False),
-              help="Continue this run directory from its last checkpoint.")
+              help="Continue this run directory from its last checkpoint (overrides: only train.total_env_steps, "
+                   "train.eval_every, train.checkpoint_every, train.keep_checkpoints, e.g. to extend a run).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.argument("overrides", nargs=-1)
 def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
@@ -103,9 +104,10 @@ def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
 
     try:
         if resume_dir:
-            if overrides or data or eval_data:
-                _fail("--resume continues a run with its own config.json; drop the overrides and --data")
-            result = run_training(None, resume_dir, resume=True, progress=not quiet, print_fn=click.echo)
+            if data or eval_data:
+                _fail("--resume continues a run with its own config.json and data; drop --data / --eval-data")
+            result = run_training(None, resume_dir, resume=True, progress=not quiet, print_fn=click.echo,
+                                  resume_overrides=overrides)
         else:
             config = preset_config(preset)
             extra = [f"data.train={data}"] * bool(data) + [f"data.eval={eval_data}"] * bool(eval_data)

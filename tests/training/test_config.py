@@ -64,6 +64,8 @@ def test_chunk_and_pool_refresh_defaults_follow_the_algorithm():
     # one ppo update is 10,240 env steps (~128 episodes): the whole pool is fresh after every update, so no
     # scenario is driven dozens of times over (a fixed 4 per 25-update chunk overfitted the pool)
     assert (chunk_steps(ppo), pool_refresh(ppo)) == (1, 64)
+    # actions held for 4 simulator steps: 4x as many (4x shorter) episodes per chunk, 4x as many fresh scenarios
+    assert pool_refresh(apply_overrides(sac, ["train.action_repeat=4"])) == 20
     fixed = apply_overrides(ppo, ["train.chunk_steps=3", "train.pool_refresh=2"])
     assert (chunk_steps(fixed), pool_refresh(fixed)) == (3, 2)
     assert config_from_dict(config_to_dict(ppo)).train.pool_refresh is None  # "auto" survives config.json

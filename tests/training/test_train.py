@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -73,6 +74,32 @@ def test_stopped_run_resumes_to_the_uninterrupted_curve(whole_run, tmp_path):
     for left, right in zip(whole, resumed):
         for key in left:
             np.testing.assert_allclose(float(left[key]), float(right[key]), rtol=1e-4, atol=1e-5, err_msg=key)
+
+
+@pytest.mark.slow
+def test_a_finished_run_extends_with_more_env_steps(whole_run, tmp_path):
+    config, whole_dir, _ = whole_run
+    extended = tmp_path / "extended"
+    shutil.copytree(whole_dir, extended)
+    result = train(None, extended, resume=True, progress=False, print_fn=lambda line: None,
+                   resume_overrides=["train.total_env_steps=160"])
+    assert result.env_steps == 160
+    logged = rows(extended)
+    assert [float(r["env_steps"]) for r in logged] == [20.0, 40.0, 60.0, 80.0, 100.0, 120.0, 140.0, 160.0]
+    assert logged[:6] == rows(whole_dir)  # the first 120 steps untouched
+    assert json.loads((extended / "config.json").read_text())["config"]["train"]["total_env_steps"] == 160
+
+
+def test_resume_changes_only_the_run_length_and_its_schedule(synthetic_shards):
+    from scenariomax.errors import InputError
+    from vmax_sim.training.run import resumed_config
+
+    saved = tiny_config(synthetic_shards, "sac", "train.total_env_steps=120")
+    longer = resumed_config(saved, ["train.total_env_steps=3e6", "train.eval_every=1000"])
+    assert (longer.train.total_env_steps, longer.train.eval_every) == (3_000_000, 1000)
+    assert longer.algo_config == saved.algo_config
+    with pytest.raises(InputError, match="only train.total_env_steps"):
+        resumed_config(saved, ["algo.learning_rate=1e-3"])
 
 
 def _cli(*args: str, env=None, **kwargs) -> subprocess.CompletedProcess:

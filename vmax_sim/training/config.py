@@ -107,8 +107,10 @@ def pool_refresh(config: TrainConfig) -> int:
         return config.train.pool_refresh
     from vmax_sim.training.loop import env_steps_per_chunk
 
+    # an env step holds its action for action_repeat simulator steps: episodes end action_repeat times sooner
     per_chunk = env_steps_per_chunk(config.algo, config.algo_config, chunk_steps(config))
-    return int(min(config.train.pool_size, max(1, -(-per_chunk // config.env.episode_length))))
+    simulator_steps = per_chunk * config.train.action_repeat
+    return int(min(config.train.pool_size, max(1, -(-simulator_steps // config.env.episode_length))))
 
 
 SECTIONS = ("algo", "network", "env", "obs", "reward", "data", "train")

@@ -21,7 +21,7 @@ import resource
 import shutil
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import jax
@@ -34,7 +34,14 @@ from vmax_sim.data import DataConfig, cache_dir
 from vmax_sim.env.learning import LearningEnv
 from vmax_sim.networks import make_encoder
 from vmax_sim.training.checkpoint import CheckpointStore
-from vmax_sim.training.config import TrainConfig, chunk_steps, config_from_dict, config_to_dict, pool_refresh
+from vmax_sim.training.config import (
+    TrainConfig,
+    apply_overrides,
+    chunk_steps,
+    config_from_dict,
+    config_to_dict,
+    pool_refresh,
+)
 from vmax_sim.training.logger import RunLogger
 from vmax_sim.training.loop import (
     EXPERT_LABELLED,
@@ -184,6 +191,10 @@ def _host_scalars(stats: dict) -> dict[str, float]:
     return out
 
 
+# settings a resumed run may change: its length and how often it evaluates and checkpoints
+RESUME_OVERRIDES = ("train.total_env_steps", "train.eval_every", "train.checkpoint_every", "train.keep_checkpoints")
+
+
 def save_run_config(run_dir: Path, config: TrainConfig) -> None:
     from vmax_sim import __version__
 
@@ -321,10 +332,24 @@ class _Progress:
             self.bar.close()
 
 
+def resumed_config(saved: TrainConfig, overrides: Sequence[str]) -> TrainConfig:
+    """The run directory's config with the overrides a resume may change (RESUME_OVERRIDES: how long the run
+    goes and how often it evaluates and checkpoints, none of which changes what it learnt so far)."""
+    for item in overrides:
+        key = item.split("=", 1)[0].strip()
+        if key not in RESUME_OVERRIDES:
+            raise InputError(f"--resume keeps the run's own configuration; only {', '.join(RESUME_OVERRIDES)} "
+                             f"may change (got {key!r})")
+    return apply_overrides(saved, overrides)
+
+
 def train(config: TrainConfig, run_dir: str | Path, *, resume: bool = False, progress: bool = True,
-          print_fn: Callable[[str], None] = print, stop_after_chunks: int | None = None) -> TrainResult:
+          print_fn: Callable[[str], None] = print, stop_after_chunks: int | None = None,
+          resume_overrides: Sequence[str] = ()) -> TrainResult:
     """Trains `config` into `run_dir` (or continues it from its last checkpoint with `resume`).
 
+    resume_overrides: `key=value` items of RESUME_OVERRIDES applied to the saved config on resume (e.g. a
+    finished run extended with `train.total_env_steps=3e6`); saved back into config.json.
     stop_after_chunks stops early (tests: a run "killed" after that many chunks, then resumed).
     """
     run_dir = Path(run_dir)
@@ -332,7 +357,9 @@ def train(config: TrainConfig, run_dir: str | Path, *, resume: bool = False, pro
         saved = load_run_config(run_dir)
         if saved != config and config is not None:
             print_fn("resuming with the run directory's own configuration (config.json)")
-        config = saved
+        config = resumed_config(saved, resume_overrides)
+        if config != saved:
+            save_run_config(run_dir, config)
     elif (run_dir / CONFIG_FILE).exists():
         raise InputError(f"{run_dir}: already holds a training run; pass --resume to continue it or choose "
                          f"another --out")
