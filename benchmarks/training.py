@@ -34,7 +34,8 @@ def _one(preset: str, overrides: list[str], chunks: int) -> dict:
     from vmax_sim.training import apply_overrides, preset_config
     from vmax_sim.training.throughput import measure_throughput
 
-    config = apply_overrides(preset_config(preset), ["train.pool_size=32", *overrides])
+    # one simulator step per env step, as the peers count them (the sac / ppo defaults hold an action for 4)
+    config = apply_overrides(preset_config(preset), ["train.pool_size=32", "train.action_repeat=1", *overrides])
     result = measure_throughput(config, num_chunks=chunks)
     result["preset"] = preset
     result["overrides"] = overrides

@@ -36,6 +36,7 @@ from vmax_sim.networks import make_encoder
 from vmax_sim.training.checkpoint import CheckpointStore
 from vmax_sim.training.config import (
     TrainConfig,
+    action_repeat,
     apply_overrides,
     chunk_steps,
     config_from_dict,
@@ -79,7 +80,7 @@ def build_learner(config: TrainConfig, env: LearningEnv):
 def components(config: TrainConfig):
     """(LearningEnv, Learner) of a configuration, built once per process so jitted functions are reused."""
     env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.algo in EXPERT_LABELLED,
-                      action_repeat=config.train.action_repeat)
+                      action_repeat=action_repeat(config))
     return env, build_learner(config, env)
 
 
