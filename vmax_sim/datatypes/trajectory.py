@@ -87,6 +87,14 @@ def select_timestep(trajectory: Trajectory, timestep: jax.Array) -> Trajectory:
     timestep = jnp.asarray(timestep, jnp.int32)
     if timestep.ndim > 0:  # batched: map over the leading axis (faster than a one-hot select)
         return jax.vmap(select_timestep)(trajectory, timestep)
+    # Read inside a conditional (both branches the same slice): XLA cannot fuse the read into the in-place
+    # write of the next step that a rollout does right after it. Fused, each written field's update read the
+    # other fields' buffers, and XLA copied every field's whole (N, T) buffer twice per step to write it
+    # (the physics step 4x slower; docs/benchmarks.md).
+    return jax.lax.cond(timestep >= 0, _slice_timestep, _slice_timestep, trajectory, timestep)
+
+
+def _slice_timestep(trajectory: Trajectory, timestep: jax.Array) -> Trajectory:
     return jax.tree.map(lambda a: jax.lax.dynamic_slice_in_dim(a, timestep, 1, axis=-1), trajectory)
 
 

@@ -47,6 +47,14 @@ def _window(values: jax.Array, timestep: jax.Array, length: int) -> jax.Array:
     return jax.lax.dynamic_slice_in_dim(values, start, length, axis=-1)
 
 
+def _sdc_windows(sim: Trajectory, sdc: jax.Array, timestep: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """The SDC's last METRIC_HISTORY x, y, yaw, each (METRIC_HISTORY,). Read inside a conditional, as
+    `select_timestep` does: fused into the step's in-place write, the read made XLA copy whole buffers."""
+    def read(x, y, yaw):
+        return tuple(_window(values[sdc], timestep, METRIC_HISTORY) for values in (x, y, yaw))
+    return jax.lax.cond(timestep >= 0, read, read, sim.x, sim.y, sim.yaw)
+
+
 def _now(trajectory: Trajectory, timestep: jax.Array) -> Trajectory:
     """Every field at `timestep`. (N, T) -> (N,)"""
     return jax.tree.map(lambda a: jax.lax.dynamic_index_in_dim(a, timestep, axis=-1, keepdims=False), trajectory)
@@ -94,10 +102,10 @@ def step_inputs(state: SimulatorState, path_log_arc: jax.Array | None = None) ->
     paths = state.sdc_paths
     if path_log_arc is None:
         path_log_arc = jnp.zeros(paths.x.shape[:-1] + (2,), jnp.float32)
-    sdc_x, sdc_y = _window(sim.x[sdc], t, METRIC_HISTORY), _window(sim.y[sdc], t, METRIC_HISTORY)
+    sdc_x, sdc_y, sdc_yaw = _sdc_windows(sim, sdc, t)
     return StepInputs(
         sdc_xy=jnp.stack([sdc_x, sdc_y], axis=-1),
-        sdc_yaw=_window(sim.yaw[sdc], t, METRIC_HISTORY),
+        sdc_yaw=sdc_yaw,
         sdc_size=jnp.stack([now.length[sdc], now.width[sdc]]),
         sdc_log_xy=jnp.stack([log.x[sdc, t], log.y[sdc, t]]),
         object_boxes=_boxes(now),
