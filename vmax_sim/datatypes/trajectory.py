@@ -87,11 +87,19 @@ def select_timestep(trajectory: Trajectory, timestep: jax.Array) -> Trajectory:
     timestep = jnp.asarray(timestep, jnp.int32)
     if timestep.ndim > 0:  # batched: map over the leading axis (faster than a one-hot select)
         return jax.vmap(select_timestep)(trajectory, timestep)
-    # Read inside a conditional (both branches the same slice): XLA cannot fuse the read into the in-place
-    # write of the next step that a rollout does right after it. Fused, each written field's update read the
-    # other fields' buffers, and XLA copied every field's whole (N, T) buffer twice per step to write it
-    # (the physics step 4x slower; docs/benchmarks.md).
-    return jax.lax.cond(timestep >= 0, _slice_timestep, _slice_timestep, trajectory, timestep)
+    # On CPU, read inside a conditional (both branches the same slice): XLA cannot fuse the read into the
+    # in-place write of the next step that a rollout does right after it. Fused, each written field's update
+    # read the other fields' buffers, and XLA copied every field's whole (N, T) buffer twice per step to write
+    # it (the physics step 4x slower; docs/benchmarks.md). Elsewhere a conditional may cost a device-to-host
+    # read of its predicate per step, so accelerators keep the plain slice.
+    if read_outside_fusion():
+        return jax.lax.cond(timestep >= 0, _slice_timestep, _slice_timestep, trajectory, timestep)
+    return _slice_timestep(trajectory, timestep)
+
+
+def read_outside_fusion() -> bool:
+    """Whether reads of the current step go through a conditional (the CPU backend; see select_timestep)."""
+    return jax.default_backend() == "cpu"
 
 
 def _slice_timestep(trajectory: Trajectory, timestep: jax.Array) -> Trajectory:
