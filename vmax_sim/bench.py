@@ -245,13 +245,9 @@ def timing_runs(batch: int) -> dict:
     return {"warmups": 3, "repeats": 5, "min_seconds": MIN_MEASURE_S}
 
 
-def _time_config(scenes: SimulatorState, init_fn, step_fn, steps: int) -> dict:
-    """{compile_s, runs, best and median scene-steps/s} of `steps` steps of a batch in one jitted program.
-
-    Like evaluation and training rollouts, each scene's episode (init + `lax.scan` over steps) is vmapped
-    over the batch. The episode starts inside the vmapped function, so the timestep is a shared scalar
-    (all scenes step in lockstep) and trajectory reads/writes are slices, not gathers/scatters.
-    """
+def make_rollout(init_fn, step_fn, steps: int):
+    """The timed program: each scene's episode (init_fn, then `steps` of step_fn with BENCH_ACTION in a
+    `lax.scan`) vmapped over the batch and jitted. scenes (B, ...) -> () float32 that keeps every step alive."""
     action = jnp.asarray(BENCH_ACTION, jnp.float32)
 
     def episode(scene):
@@ -263,7 +259,17 @@ def _time_config(scenes: SimulatorState, init_fn, step_fn, steps: int) -> dict:
         _, outs = jax.lax.scan(body, state, None, length=steps)
         return jnp.sum(outs)
 
-    rollout = jax.jit(jax.vmap(episode))
+    return jax.jit(jax.vmap(episode))
+
+
+def _time_config(scenes: SimulatorState, init_fn, step_fn, steps: int) -> dict:
+    """{compile_s, runs, best and median scene-steps/s} of `steps` steps of a batch in one jitted program.
+
+    Like evaluation and training rollouts, each scene's episode (init + `lax.scan` over steps) is vmapped
+    over the batch. The episode starts inside the vmapped function, so the timestep is a shared scalar
+    (all scenes step in lockstep) and trajectory reads/writes are slices, not gathers/scatters.
+    """
+    rollout = make_rollout(init_fn, step_fn, steps)
     batch = jax.tree_util.tree_leaves(scenes)[0].shape[0]
     runs = timing_runs(batch)
     start = time.perf_counter()

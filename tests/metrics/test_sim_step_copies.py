@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import re
 
-import jax
-import jax.numpy as jnp
 import pytest
 
 from vmax_sim import bench
@@ -22,13 +20,7 @@ BATCH, OBJECTS, STEPS = 2, 64, 20
 def _compiled_rollout(with_metrics_and_observation: bool) -> str:
     scenes = bench._scenes(BATCH, OBJECTS, 5000)
     init_fn, step_fn = bench.make_episode_fns(with_metrics_and_observation, with_metrics_and_observation, OBJECTS)
-    action = jnp.asarray(bench.BENCH_ACTION, jnp.float32)
-
-    def episode(scene):
-        state, arcs = init_fn(scene)
-        _, outs = jax.lax.scan(lambda s, _: step_fn(arcs, s, action), state, None, length=STEPS)
-        return jnp.sum(outs)
-    return jax.jit(jax.vmap(episode)).lower(scenes).compile().as_text()
+    return bench.make_rollout(init_fn, step_fn, STEPS).lower(scenes).compile().as_text()
 
 
 @pytest.mark.skipif(not read_outside_fusion(), reason="the conditional read is used on the CPU backend only")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import jax
 import jax.numpy as jnp
 from flax import struct
@@ -87,19 +89,26 @@ def select_timestep(trajectory: Trajectory, timestep: jax.Array) -> Trajectory:
     timestep = jnp.asarray(timestep, jnp.int32)
     if timestep.ndim > 0:  # batched: map over the leading axis (faster than a one-hot select)
         return jax.vmap(select_timestep)(trajectory, timestep)
-    # On CPU, read inside a conditional (both branches the same slice): XLA cannot fuse the read into the
-    # in-place write of the next step that a rollout does right after it. Fused, each written field's update
-    # read the other fields' buffers, and XLA copied every field's whole (N, T) buffer twice per step to write
-    # it (the physics step 4x slower; docs/benchmarks.md). Elsewhere a conditional may cost a device-to-host
-    # read of its predicate per step, so accelerators keep the plain slice.
-    if read_outside_fusion():
-        return jax.lax.cond(timestep >= 0, _slice_timestep, _slice_timestep, trajectory, timestep)
-    return _slice_timestep(trajectory, timestep)
+    return read_unfused(_slice_timestep, timestep, trajectory, timestep)
 
 
 def read_outside_fusion() -> bool:
-    """Whether reads of the current step go through a conditional (the CPU backend; see select_timestep)."""
+    """Whether `read_unfused` reads through a conditional (the CPU backend)."""
     return jax.default_backend() == "cpu"
+
+
+def read_unfused(read: Callable, timestep: jax.Array, *operands):
+    """read(*operands), on CPU inside a conditional whose two branches are `read` (timestep () int32 >= 0).
+
+    XLA cannot fuse a read made inside a conditional into the in-place write of the next step that a rollout
+    does right after it. Fused, each written field's update read the other fields' buffers, and XLA copied
+    every field's whole (N, T) buffer twice per step to write it (the physics step 4x slower;
+    docs/benchmarks.md). Elsewhere a conditional may cost a device-to-host read of its predicate per step, so
+    accelerators read plainly.
+    """
+    if read_outside_fusion():
+        return jax.lax.cond(timestep >= 0, read, read, *operands)
+    return read(*operands)
 
 
 def _slice_timestep(trajectory: Trajectory, timestep: jax.Array) -> Trajectory:

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.datatypes import SimulatorState, Trajectory
-from vmax_sim.datatypes.trajectory import read_outside_fusion
+from vmax_sim.datatypes.trajectory import read_unfused
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.termination import TerminationFn, combine_termination_fns
 from vmax_sim.map_index.query import lane_candidates, nearest_lane, route_reference_arcs
@@ -49,13 +49,11 @@ def _window(values: jax.Array, timestep: jax.Array, length: int) -> jax.Array:
 
 
 def _sdc_windows(sim: Trajectory, sdc: jax.Array, timestep: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """The SDC's last METRIC_HISTORY x, y, yaw, each (METRIC_HISTORY,). Read inside a conditional, as
-    `select_timestep` does: fused into the step's in-place write, the read made XLA copy whole buffers."""
+    """The SDC's last METRIC_HISTORY x, y, yaw, each (METRIC_HISTORY,), read as `select_timestep` reads
+    (`read_unfused`): fused into the step's in-place write, the read made XLA copy whole buffers."""
     def read(x, y, yaw):
         return tuple(_window(values[sdc], timestep, METRIC_HISTORY) for values in (x, y, yaw))
-    if read_outside_fusion():
-        return jax.lax.cond(timestep >= 0, read, read, sim.x, sim.y, sim.yaw)
-    return read(sim.x, sim.y, sim.yaw)
+    return read_unfused(read, timestep, sim.x, sim.y, sim.yaw)
 
 
 def _now(trajectory: Trajectory, timestep: jax.Array) -> Trajectory:
