@@ -70,6 +70,27 @@ def test_step_drives_the_sdc_and_replays_everyone_else(batch):
     assert not bool(sim.valid[4, 11])  # the late car is still absent, as in the log
 
 
+def test_the_cached_current_step_is_the_trajectory_at_the_timestep(batch):
+    """reset and step keep `current_sim` (what a step reads instead of slicing every (N, T) field) equal to
+    the trajectory's slice; a trajectory or timestep changed through `replace` re-reads it, never stale."""
+    from vmax_sim.datatypes import select_timestep
+    env = Environment(CONFIG)
+    state = env.reset(batch)  # batched: per-scene timesteps
+    step = jax.jit(env.step)
+    action = Action(data=jnp.tile(jnp.asarray([[1.5, 0.02]]), (3, 8, 1)), valid=jnp.ones((3, 8, 1), bool))
+    for _ in range(5):
+        sliced = select_timestep(state.sim_trajectory, state.timestep)
+        chex.assert_trees_all_equal(state.current_sim, sliced)
+        state = step(state, action)
+    moved = state.replace(sim_trajectory=state.sim_trajectory.replace(x=state.sim_trajectory.x + 1.0))
+    np.testing.assert_array_equal(moved.current_sim.x, state.current_sim.x + 1.0)
+    rewound = state.replace(timestep=state.timestep - 2)
+    chex.assert_trees_all_equal(rewound.current_sim, select_timestep(state.sim_trajectory, state.timestep - 2))
+    loaded = unbatch(batch, 0)
+    assert loaded.current_sim is None  # loader states slice on demand
+    chex.assert_trees_all_equal(loaded.current_sim_trajectory, select_timestep(loaded.sim_trajectory, loaded.timestep))
+
+
 def test_invalid_action_makes_the_controlled_object_invalid(batch):
     env = Environment(CONFIG)
     nxt = env.step(env.reset(unbatch(batch, 0)), zero_action(valid=False))

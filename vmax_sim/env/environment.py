@@ -11,7 +11,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from vmax_sim.datatypes import Action, SimulatorState, Trajectory, fill_invalid, update_timestep
+from vmax_sim.datatypes import Action, SimulatorState, Trajectory, fill_invalid, select_timestep, update_timestep
 from vmax_sim.dynamics import DynamicsModel, get_dynamics
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.termination import TerminationFn
@@ -81,10 +81,12 @@ class Environment:
         first = self.config.first_policy_timestep
         timestep = jnp.full(state.batch_shape, first, jnp.int32)
         is_past = jnp.arange(state.num_timesteps) <= timestep[..., None, None]  # (..., 1, T)
+        sim_trajectory = fill_invalid(state.log_trajectory, is_past)
         return state.replace(
-            sim_trajectory=fill_invalid(state.log_trajectory, is_past),
+            sim_trajectory=sim_trajectory,
             object_metadata=state.object_metadata.replace(is_controlled=controlled_mask(self.config, state)),
             timestep=timestep,
+            current_sim=select_timestep(sim_trajectory, timestep),
         )
 
     def step(self, state: SimulatorState, action: Action) -> SimulatorState:
@@ -97,8 +99,9 @@ class Environment:
         new = merge_next_state(current, predicted, state.next_log_trajectory,
                                state.object_metadata.is_controlled, action.valid)
         next_timestep = jnp.minimum(state.timestep + 1, state.num_timesteps - 1).astype(jnp.int32)
+        new = jax.tree.map(lambda a, v: v.astype(a.dtype), state.sim_trajectory, new)  # as written
         return state.replace(sim_trajectory=update_timestep(state.sim_trajectory, next_timestep, new),
-                             timestep=next_timestep)
+                             timestep=next_timestep, current_sim=new)
 
     def is_terminated(self, state: SimulatorState) -> jax.Array:
         """The injected termination predicate (False without one). (...) bool"""

@@ -169,7 +169,8 @@ class LearningEnv:
         flags = {name: flag | (running & (new_metrics[name] > 0.5)) for name, flag in flags.items()}
         # a step changes only the simulated trajectory and the timestep: the log and the map index stay as they are
         sim = sim.replace(sim_trajectory=keep(new_sim.sim_trajectory, sim.sim_trajectory),
-                          timestep=keep(new_sim.timestep, sim.timestep))
+                          timestep=keep(new_sim.timestep, sim.timestep),
+                          current_sim=keep(new_sim.current_sim, sim.current_sim))
         return (sim, keep(new_shared, shared), keep(new_metrics, metrics), reward,
                 terminated | (running & new_terminated), truncated | (running & new_truncated), flags)
 

@@ -56,9 +56,9 @@ def _sdc_windows(sim: Trajectory, sdc: jax.Array, timestep: jax.Array) -> tuple[
     return read_unfused(read, timestep, sim.x, sim.y, sim.yaw)
 
 
-def _now(trajectory: Trajectory, timestep: jax.Array) -> Trajectory:
-    """Every field at `timestep`. (N, T) -> (N,)"""
-    return jax.tree.map(lambda a: jax.lax.dynamic_index_in_dim(a, timestep, axis=-1, keepdims=False), trajectory)
+def _now(state: SimulatorState) -> Trajectory:
+    """Every simulated field at the current step (the step's cached copy when it has one). -> (N,) fields"""
+    return jax.tree.map(lambda a: a[..., 0], state.current_sim_trajectory)
 
 
 def _boxes(now: Trajectory) -> jax.Array:
@@ -97,7 +97,7 @@ def step_inputs(state: SimulatorState, path_log_arc: jax.Array | None = None) ->
     t = state.timestep
     sdc = sdc_index(state)
     sim, log = state.sim_trajectory, state.log_trajectory
-    now = _now(sim, t)
+    now = _now(state)
     lights = state.log_traffic_light
     light_now = jax.tree.map(lambda a: jax.lax.dynamic_index_in_dim(a, t, axis=-1, keepdims=False), lights)
     paths = state.sdc_paths
@@ -130,7 +130,7 @@ def observation_inputs(state: SimulatorState, num_history: int = 5) -> Observati
     sdc = sdc_index(state)
     sim = state.sim_trajectory
     window = jax.tree.map(lambda a: _window(a, t, num_history), sim)  # (N, k) fields
-    now = _now(sim, t)
+    now = _now(state)
     lights = jax.tree.map(lambda a: jax.lax.dynamic_index_in_dim(a, t, axis=-1, keepdims=False),
                           state.log_traffic_light)
     paths = state.sdc_paths
