@@ -62,8 +62,8 @@ def test_chunk_and_pool_refresh_defaults_follow_the_algorithm():
     sac, ppo = preset_config("sac"), preset_config("ppo")
     # 16 envs x 25 steps = 400 env steps, each action held 4 simulator steps: 1,600 simulator steps, ~20 episodes
     assert (chunk_steps(sac), pool_refresh(sac)) == (25, 20)
-    # one ppo update is 10,240 env steps (~128 episodes): the whole pool is fresh after every update, so no
-    # scenario is driven dozens of times over (a fixed 4 per 25-update chunk overfitted the pool)
+    # one ppo update is 2,560 env steps of 4 simulator steps (~128 episodes): the whole pool is fresh after every
+    # update, so no scenario is driven dozens of times over (a fixed 4 per 25-update chunk overfitted the pool)
     assert (chunk_steps(ppo), pool_refresh(ppo)) == (1, 64)
     assert pool_refresh(apply_overrides(sac, ["train.action_repeat=1"])) == 5  # one step per action: ~5 episodes
     fixed = apply_overrides(ppo, ["train.chunk_steps=3", "train.pool_refresh=2"])
@@ -76,7 +76,8 @@ def test_defaults_are_what_learns_best_here_and_paper_keeps_the_paper():
 
     sac, ppo, bc = preset_config("sac"), preset_config("ppo"), preset_config("bc")
     assert (sac.network.name, action_repeat(sac), sac.algo_config.gamma) == ("mlp", 4, 0.96)
-    assert (ppo.network.name, action_repeat(ppo), ppo.algo_config.gamma) == ("none", 4, 0.96)
+    assert (ppo.network.name, action_repeat(ppo), ppo.algo_config.gamma) == ("mlp", 4, 0.96)
+    assert ppo.algo_config.transitions_per_update == 2_560  # 16 sequences x 4 minibatches x 40 steps
     assert (bc.network.name, action_repeat(bc)) == ("mlp", 1)
     paper = preset_config("paper-sac-lq")
     assert (paper.network.name, action_repeat(paper), paper.algo_config.gamma) == ("lq", 1, 0.99)
