@@ -57,13 +57,13 @@ class SimulatorState:
     @property
     def current_log_trajectory(self) -> Trajectory:
         """Logged state at the current step. (..., num_objects, 1)"""
-        return select_timestep(self.log_trajectory, self.timestep)
+        return select_timestep(self.log_trajectory, self.timestep, written=False)
 
     @property
     def next_log_trajectory(self) -> Trajectory:
         """Logged state one step ahead (clamped at the last step). (..., num_objects, 1)"""
         last = self.num_timesteps - 1
-        return select_timestep(self.log_trajectory, jnp.minimum(self.timestep + 1, last))
+        return select_timestep(self.log_trajectory, jnp.minimum(self.timestep + 1, last), written=False)
 
     @property
     def current_traffic_lights(self) -> TrafficLights:

@@ -81,14 +81,18 @@ class Trajectory:
         return jnp.stack([cx, cy], axis=-1)
 
 
-def select_timestep(trajectory: Trajectory, timestep: jax.Array) -> Trajectory:
+def select_timestep(trajectory: Trajectory, timestep: jax.Array, written: bool = True) -> Trajectory:
     """The trajectory at `timestep`, keeping a time axis of 1.
 
     trajectory (..., N, T); timestep () or (...) int32 -> (..., N, 1). Indices clamp to [0, T-1].
+    `written=False` for a trajectory no step writes (the log): read plainly, XLA may fuse the read into its
+    users; a trajectory a rollout writes is read with `read_unfused`.
     """
     timestep = jnp.asarray(timestep, jnp.int32)
     if timestep.ndim > 0:  # batched: map over the leading axis (faster than a one-hot select)
-        return jax.vmap(select_timestep)(trajectory, timestep)
+        return jax.vmap(lambda tr, t: select_timestep(tr, t, written))(trajectory, timestep)
+    if not written:
+        return _slice_timestep(trajectory, timestep)
     return read_unfused(_slice_timestep, timestep, trajectory, timestep)
 
 
