@@ -12,7 +12,7 @@ import pytest
 from conftest import make_scenario, small_config
 
 from vmax_sim.data import scenario_to_state, scenarios_to_batch
-from vmax_sim.datatypes import Action
+from vmax_sim.datatypes import Action, select_timestep
 from vmax_sim.dynamics import wrap_angle
 from vmax_sim.env import (
     AutoResetEnvironment,
@@ -73,7 +73,6 @@ def test_step_drives_the_sdc_and_replays_everyone_else(batch):
 def test_the_cached_current_step_is_the_trajectory_at_the_timestep(batch):
     """reset and step keep `current_sim` (what a step reads instead of slicing every (N, T) field) equal to
     the trajectory's slice; a trajectory or timestep changed through `replace` re-reads it, never stale."""
-    from vmax_sim.datatypes import select_timestep
     env = Environment(CONFIG)
     state = env.reset(batch)  # batched: per-scene timesteps
     step = jax.jit(env.step)
