@@ -23,7 +23,7 @@ from flax import struct
 from vmax_sim.datatypes import SimulatorState
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.environment import Environment
-from vmax_sim.env.metrics_adapter import reference_arcs, sdc_observation, step_inputs
+from vmax_sim.env.metrics_adapter import reference_arcs, sdc_index, sdc_observation, step_inputs
 from vmax_sim.evaluation.policies import sdc_action
 from vmax_sim.metrics import MetricsConfig, SharedQueries, shared_queries, step_metrics
 from vmax_sim.observation import Observation, ObservationConfig
@@ -122,7 +122,7 @@ class LearningEnv:
 
     def _expert(self, sim: SimulatorState) -> jax.Array:
         """The SDC's log-following action in [-1, 1] (inverse dynamics of the SDC's row only). (A,)"""
-        sdc = jnp.argmax(sim.object_metadata.is_sdc)
+        sdc = sdc_index(sim)
         row = lambda trajectory: jax.tree.map(lambda a: jax.lax.dynamic_slice_in_dim(a, sdc, 1, 0),  # noqa: E731
                                               trajectory)
         dynamics = self.core.dynamics

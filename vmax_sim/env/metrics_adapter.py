@@ -17,6 +17,7 @@ from vmax_sim.datatypes import SimulatorState, Trajectory
 from vmax_sim.datatypes.trajectory import read_unfused
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.termination import TerminationFn, combine_termination_fns
+from vmax_sim.geometry.reductions import first_true
 from vmax_sim.map_index.query import lane_candidates, nearest_lane, route_reference_arcs
 from vmax_sim.metrics import (
     MetricsConfig,
@@ -35,7 +36,7 @@ METRIC_HISTORY = 3  # steps of SDC history the per-step metrics need (finite dif
 
 def sdc_index(state: SimulatorState) -> jax.Array:
     """Slot of the SDC. () int32"""
-    return jnp.argmax(state.object_metadata.is_sdc).astype(jnp.int32)
+    return first_true(state.object_metadata.is_sdc)
 
 
 def _window(values: jax.Array, timestep: jax.Array, length: int) -> jax.Array:

@@ -25,3 +25,12 @@ def to_local_vectors(vec: jnp.ndarray, origin_yaw: jnp.ndarray) -> jnp.ndarray:
 def wrap_angle(angle: jnp.ndarray) -> jnp.ndarray:
     """Angles wrapped to [-pi, pi). (...,) -> (...,)."""
     return (angle + jnp.pi) % (2 * jnp.pi) - jnp.pi
+
+
+def vector_length(vec: jnp.ndarray) -> jnp.ndarray:
+    """Length of 2-D vectors. (..., 2) -> (...,).
+
+    Written out: `jnp.linalg.norm(..., axis=-1)` is a reduction over an axis of 2, which XLA's CPU backend
+    hands to a library call per use (measured slower than this one fused expression).
+    """
+    return jnp.sqrt(vec[..., 0] * vec[..., 0] + vec[..., 1] * vec[..., 1])

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from vmax_sim.geometry.reductions import argmin_packed
 from vmax_sim.map_index.structure import OBS_DIR_STEPS, OBS_SPEED_STEP, OBS_XY_STEPS, MapIndex
 
 
@@ -175,7 +176,7 @@ def nearest_lane(candidates: LaneCandidates, yaw: jnp.ndarray, heading_weight: f
     junctions resolve to the one the agent follows. -> () int32.
     """
     misalign = 1.0 - (candidates.dir_x * jnp.cos(yaw) + candidates.dir_y * jnp.sin(yaw))
-    return jnp.argmin(candidates.distance + heading_weight * misalign).astype(jnp.int32)
+    return argmin_packed(candidates.distance + heading_weight * misalign)
 
 
 OBS_POINT_FEATURES = 8  # x, y, dir x, dir y, speed limit, is edge, is lane, is line
@@ -241,7 +242,7 @@ def project_on_paths(path_xy: jnp.ndarray, path_valid: jnp.ndarray, path_arc: jn
     px, py = path_xy[..., 0], path_xy[..., 1]
     kx, ky = px[:, ::stride] - xy[0], py[:, ::stride] - xy[1]
     knot_dist = jnp.where(path_valid[:, ::stride], kx * kx + ky * ky, jnp.inf)
-    best_knot = jnp.argmin(knot_dist, axis=1) * stride  # (P,)
+    best_knot = argmin_packed(knot_dist, axis=1) * stride  # (P,)
     width = min(2 * stride + 1, num_points)
     lo = jnp.clip(best_knot - stride, 0, num_points - width)
     # one contiguous (4, width) window per path: a few block copies instead of per-element gathers
@@ -256,7 +257,7 @@ def project_on_paths(path_xy: jnp.ndarray, path_valid: jnp.ndarray, path_arc: jn
     t = jnp.clip((rx * dx + ry * dy) / len_sq, 0.0, 1.0)
     ox, oy = rx - t * dx, ry - t * dy
     dist_sq = jnp.where(ok, ox * ox + oy * oy, jnp.inf)
-    is_k = jnp.arange(width - 1)[None] == jnp.argmin(dist_sq, axis=1)[:, None]  # (P, width - 1) one-hot
+    is_k = jnp.arange(width - 1)[None] == argmin_packed(dist_sq, axis=1)[:, None]  # (P, width - 1) one-hot
 
     def at_k(values):  # select by mask and sum: elementwise, no gather
         return jnp.sum(jnp.where(is_k, values, 0.0), axis=1)

@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.geometry.boxes import bounding_radius, boxes_overlap, contact_time
-from vmax_sim.geometry.transforms import to_local_points
+from vmax_sim.geometry.transforms import to_local_points, vector_length
 
 
 def select_candidates(sdc_box: jnp.ndarray, boxes: jnp.ndarray, valid: jnp.ndarray,
@@ -17,7 +17,7 @@ def select_candidates(sdc_box: jnp.ndarray, boxes: jnp.ndarray, valid: jnp.ndarr
     the SDC has a gap <= 0, so it is always among the first unless more than `num` touch.
     sdc_box (5,), boxes (N, 5), valid (N,) -> indices (num,) int32, valid (num,) bool.
     """
-    gap = (jnp.linalg.norm(boxes[:, :2] - sdc_box[:2], axis=-1) - bounding_radius(boxes)
+    gap = (vector_length(boxes[:, :2] - sdc_box[:2]) - bounding_radius(boxes)
            - bounding_radius(sdc_box))
     gap = jnp.where(valid, gap, jnp.inf)
     k = min(num, gap.shape[0])

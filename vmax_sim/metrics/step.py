@@ -10,7 +10,8 @@ import flax.struct
 import jax.numpy as jnp
 
 from vmax_sim.geometry.boxes import box_corners
-from vmax_sim.geometry.transforms import wrap_angle
+from vmax_sim.geometry.reductions import argmin_packed
+from vmax_sim.geometry.transforms import vector_length, wrap_angle
 from vmax_sim.map_index.query import (
     LaneCandidates,
     PathProjection,
@@ -72,7 +73,7 @@ def finite_difference_motion(xy: jnp.ndarray, yaw: jnp.ndarray, dt: float) -> di
     """Speed, velocity, acceleration and curvature at the last of >= 3 samples. (H, 2), (H,) -> dict."""
     vel_now = (xy[-1] - xy[-2]) / dt
     vel_before = (xy[-2] - xy[-3]) / dt
-    speed_now, speed_before = jnp.linalg.norm(vel_now), jnp.linalg.norm(vel_before)
+    speed_now, speed_before = vector_length(vel_now), vector_length(vel_before)
     dyaw = wrap_angle(yaw[-1] - yaw[-2])
     step_len = speed_now * dt
     curvature = jnp.where(step_len > 0.05, dyaw / jnp.maximum(step_len, 1e-6), 0.0)
@@ -130,7 +131,7 @@ def on_multiple_lanes(lanes: LaneCandidates, sdc_xy: jnp.ndarray, sdc_yaw: jnp.n
     parallel = jnp.abs(lanes.dir_x * cos + lanes.dir_y * sin) > jnp.cos(jnp.deg2rad(max_angle_deg))
     near = lanes.valid & parallel & (lanes.distance < 3.2 * lane_half_width + 0.5 * sdc_width)
     offset = (lanes.closest_y - sdc_xy[1]) * cos - (lanes.closest_x - sdc_xy[0]) * sin  # (K,) to the SDC's left
-    own = jnp.argmin(jnp.where(near, jnp.abs(offset), jnp.inf))  # the lane the SDC's centre is in
+    own = argmin_packed(jnp.where(near, jnp.abs(offset), jnp.inf))  # the lane the SDC's centre is in
     own_offset = offset[own]
     # The adjacent lanes: the nearest centrelines on each side of the SDC's own lane.
     left = jnp.min(jnp.where(near & (offset > own_offset + 1.0), offset, jnp.inf))
@@ -204,7 +205,7 @@ def step_metrics(map_index: MapIndex, inputs: StepInputs, config: MetricsConfig 
                               @ jnp.stack([lanes.dir_x[own_k], lanes.dir_y[own_k]]), 0.0)
     multiple = on_multiple_lanes(lanes, xy, yaw, size[1], config.lane_half_width, config.lane_max_angle_deg)
 
-    fault = at_fault_collisions(sdc_box, motion["speed"], boxes, jnp.linalg.norm(vels, axis=-1), colliding,
+    fault = at_fault_collisions(sdc_box, motion["speed"], boxes, vector_length(vels), colliding,
                                 multiple, is_offroad, config.stopped_speed)
     ttc = time_to_collision(sdc_box, motion["velocity"], boxes, vels, cand_valid, config.ttc_threshold)
     ttc = jnp.where(motion["speed"] > config.ttc_ego_min_speed, ttc, jnp.inf)
@@ -213,7 +214,7 @@ def step_metrics(map_index: MapIndex, inputs: StepInputs, config: MetricsConfig 
     proj = shared.path_projection
     path_ok = jnp.any(inputs.path_valid, axis=1)
     nearest_any, nearest_on, nearest_off = route_distances(proj.distance, path_ok, inputs.path_on_route)
-    route = jnp.argmin(jnp.where(path_ok & inputs.path_on_route, proj.distance, jnp.inf))
+    route = argmin_packed(jnp.where(path_ok & inputs.path_on_route, proj.distance, jnp.inf))
     has_route = jnp.isfinite(nearest_on)
     start_arc, end_arc = inputs.path_log_arc[route, 0], inputs.path_log_arc[route, 1]
     ego_progress = jnp.where(has_route, proj.arc[route] - start_arc, 0.0)
@@ -236,7 +237,7 @@ def step_metrics(map_index: MapIndex, inputs: StepInputs, config: MetricsConfig 
         "off_route": off_route(nearest_on, nearest_off, config.off_route_distance,
                                config.off_route_relative_distance),
         "progress_ratio": progress_ratio,
-        "log_divergence": jnp.linalg.norm(xy - inputs.sdc_log_xy),
+        "log_divergence": vector_length(xy - inputs.sdc_log_xy),
         "kinematic_infeasibility": infeasible,
         "at_fault_collision": jnp.any(fault),
         "ttc": jnp.minimum(ttc, 1e3), "ttc_violation": ttc <= config.ttc_threshold,

@@ -14,7 +14,8 @@ from scenariomax.schema import (
     TL_GO,
 )
 from vmax_sim.geometry.boxes import boxes_overlap
-from vmax_sim.geometry.transforms import to_local_points, to_local_vectors
+from vmax_sim.geometry.reductions import argmin_packed
+from vmax_sim.geometry.transforms import to_local_points, to_local_vectors, vector_length
 from vmax_sim.map_index.query import PathProjection, observation_points, project_on_paths
 from vmax_sim.map_index.structure import MapIndex
 from vmax_sim.metrics.config import DEFAULT_METRICS_CONFIG
@@ -77,7 +78,7 @@ def nearest_objects(sdc_xy: jnp.ndarray, object_xy: jnp.ndarray, valid: jnp.ndar
 
     (2,), (N, 2), (N,) -> indices (num,) int32, valid (num,) bool.
     """
-    dist = jnp.where(valid, jnp.linalg.norm(object_xy - sdc_xy, axis=-1), jnp.inf)
+    dist = jnp.where(valid, vector_length(object_xy - sdc_xy), jnp.inf)
     k = min(num, dist.shape[0])
     neg, idx = jax.lax.top_k(-dist, k)
     return (jnp.pad(idx.astype(jnp.int32), (0, num - k)), jnp.pad(jnp.isfinite(neg), (0, num - k)))
@@ -150,7 +151,7 @@ def roadgraph_features(map_index: MapIndex, sdc_xy: jnp.ndarray, sdc_yaw: jnp.nd
 def light_features(inputs: ObservationInputs, config: ObservationConfig):
     """The closest traffic lights with their state. -> (num_lights, LIGHT_FEATURES), (num_lights,)."""
     origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
-    dist = jnp.where(inputs.light_valid, jnp.linalg.norm(inputs.light_xy - origin, axis=-1), jnp.inf)
+    dist = jnp.where(inputs.light_valid, vector_length(inputs.light_xy - origin), jnp.inf)
     num = min(config.num_lights, dist.shape[0])
     neg, idx = jax.lax.top_k(-dist, num)
     state = inputs.light_state[idx]
@@ -175,7 +176,7 @@ def path_targets(inputs: ObservationInputs, config: ObservationConfig, projectio
     origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
     proj = projection or project_on_paths(inputs.path_xy, inputs.path_valid, inputs.path_arc, origin)
     usable = jnp.any(inputs.path_valid, axis=1) & inputs.path_on_route
-    route = jnp.argmin(jnp.where(usable, proj.distance, jnp.inf))
+    route = argmin_packed(jnp.where(usable, proj.distance, jnp.inf))
     pxy, pvalid, parc = inputs.path_xy[route], inputs.path_valid[route], inputs.path_arc[route]
     big = jnp.finfo(jnp.float32).max
     arc = jnp.where(pvalid, parc, big)
@@ -198,7 +199,7 @@ def apply_noise(key: jax.Array, inputs: ObservationInputs, indices: jnp.ndarray,
     xy = inputs.object_xy + noise.position_std * jax.random.normal(key_pos, inputs.object_xy.shape)
     origin = inputs.sdc_xy[-1]
     now = inputs.object_xy[indices, -1]
-    dist = jnp.linalg.norm(now - origin, axis=-1)
+    dist = vector_length(now - origin)
     ramp = jnp.clip((dist - noise.dropout_start) / max(config.max_distance - noise.dropout_start, 1e-3), 0.0, 1.0)
     visible = jax.random.uniform(key_drop, dist.shape) >= noise.dropout_max_prob * ramp
     if noise.occlusion:
@@ -206,7 +207,7 @@ def apply_noise(key: jax.Array, inputs: ObservationInputs, indices: jnp.ndarray,
         valid_now = inputs.object_valid[indices, -1] & index_valid
         # sight line to each object as a zero-width box, tested against every nearer object
         mid, delta = 0.5 * (origin + now), now - origin
-        sight = jnp.concatenate([mid, jnp.linalg.norm(delta, axis=-1, keepdims=True),
+        sight = jnp.concatenate([mid, vector_length(delta)[:, None],
                                  jnp.full_like(dist[:, None], 1e-3),
                                  jnp.arctan2(delta[:, 1], delta[:, 0])[:, None]], -1)
         blocks = boxes_overlap(sight[:, None], boxes[None]) & valid_now[None] & (dist[None] < dist[:, None])

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 from scenariomax.schema import OBJECT_TYPE_PEDESTRIAN
 from vmax_sim.datatypes import SimulatorState
 from vmax_sim.evaluation.policies import Policy
-from vmax_sim.geometry.transforms import to_local_points
+from vmax_sim.geometry.transforms import to_local_points, vector_length
 from vmax_sim.map_index.query import lane_candidates
 from vmax_sim.metrics import (
     MetricsConfig,
@@ -147,7 +147,7 @@ def select_objects(scene: Scene, num: int, lane_half_width: float) -> jax.Array:
     """Indices (num,) of the objects to forecast: nearest the SDC, those in its corridor ahead counted
     at a quarter of their distance (a leader 60 m ahead matters more than a car 20 m to the side)."""
     obj = scene.objects
-    distance = jnp.linalg.norm(obj.boxes[:, :2] - scene.ego.xy, axis=-1)
+    distance = vector_length(obj.boxes[:, :2] - scene.ego.xy)
     in_lane = (jnp.abs(obj.lateral) < lane_half_width + obj.half_across + 1.0) & (obj.arc > scene.ego_arc)
     key = jnp.where(obj.valid, jnp.where(in_lane, 0.25 * distance, distance), jnp.inf)
     k = min(num, key.shape[0])
@@ -166,7 +166,7 @@ def red_light_stop_time(state: SimulatorState, boxes: jax.Array, vel: jax.Array,
     lights = jax.tree.map(lambda a: jax.lax.dynamic_index_in_dim(a, t, axis=-1, keepdims=False),
                           state.log_traffic_light)  # (L,) fields
     red = lights.valid & jnp.isin(lights.state, jnp.asarray(stop_states))  # (L,)
-    speed = jnp.linalg.norm(vel, axis=-1)  # (K,)
+    speed = vector_length(vel)  # (K,)
     heading = vel / jnp.maximum(speed, 1e-3)[:, None]  # (K, 2)
     rel = jnp.stack([lights.x, lights.y], -1)[None] - boxes[:, None, :2]  # (K, L, 2)
     ahead = jnp.sum(rel * heading[:, None], -1) - 0.5 * boxes[:, None, 2]  # (K, L) from the front bumper
@@ -302,7 +302,7 @@ def score(state: SimulatorState, scene: Scene, fc: Forecast, props: Proposals, c
     boxes = jnp.concatenate([props.xy, jnp.broadcast_to(size, props.yaw.shape + (2,)), props.yaw[..., None]], -1)
     heading = jnp.stack([jnp.cos(props.yaw), jnp.sin(props.yaw)], -1)
     vel = props.speed[..., None] * heading  # (P, H + 1, 2)
-    obj_speed = jnp.linalg.norm(fc.vel[0], axis=-1)  # (K,)
+    obj_speed = vector_length(fc.vel[0])  # (K,)
 
     shifted = jnp.abs(props.offset) > 0.1  # (P,) off the lane centre: a side hit is the SDC's fault
 
