@@ -247,7 +247,8 @@ def timing_runs(batch: int) -> dict:
 
 def make_rollout(init_fn, step_fn, steps: int):
     """The timed program: each scene's episode (init_fn, then `steps` of step_fn with BENCH_ACTION in a
-    `lax.scan`) vmapped over the batch and jitted. scenes (B, ...) -> () float32 that keeps every step alive."""
+    `lax.scan`) vmapped over the batch and jitted. scenes (B, ...) -> () float32 that keeps every step and the
+    written trajectory alive."""
     action = jnp.asarray(BENCH_ACTION, jnp.float32)
 
     def episode(scene):
@@ -256,10 +257,20 @@ def make_rollout(init_fn, step_fn, steps: int):
         def body(state, _):
             state, out = step_fn(arcs, state, action)
             return state, out
-        _, outs = jax.lax.scan(body, state, None, length=steps)
-        return jnp.sum(outs)
+        final, outs = jax.lax.scan(body, state, None, length=steps)
+        return jnp.sum(outs) + written_checksum(final.sim_trajectory)
 
     return jax.jit(jax.vmap(episode))
+
+
+WRITTEN_FIELDS = ("x", "y", "yaw", "vel_x", "vel_y", "valid")  # what a step writes that a user reads
+
+
+def written_checksum(trajectory) -> jax.Array:
+    """Sum of the final trajectory's WRITTEN_FIELDS. Without it, a simulator that caches the current step
+    would have its trajectory writes removed as dead code and time less work than one that reads the
+    trajectory back (Waymax's timing program keeps the same fields). (..., N, T) -> () float32."""
+    return sum(jnp.sum(getattr(trajectory, name).astype(jnp.float32)) for name in WRITTEN_FIELDS)
 
 
 def _time_config(scenes: SimulatorState, init_fn, step_fn, steps: int) -> dict:

@@ -148,8 +148,11 @@ def main(argv: list[str]) -> None:
         def body(state, _):
             state = environment.step(state, action)
             return state, jnp.sum(state.current_sim_trajectory.x)  # as the bench's env-only step keeps it alive
-        _, outs = jax.lax.scan(body, state, None, length=request["steps"])
-        return jnp.sum(outs)
+        final, outs = jax.lax.scan(body, state, None, length=request["steps"])
+        # the trajectory fields the bench's program keeps alive too (vmax_sim.bench.WRITTEN_FIELDS)
+        written = final.sim_trajectory
+        return jnp.sum(outs) + sum(jnp.sum(getattr(written, name).astype(jnp.float32))
+                                   for name in ("x", "y", "yaw", "vel_x", "vel_y", "valid"))
 
     rollout = jax.jit(jax.vmap(episode))
     device = jax.devices()[0]

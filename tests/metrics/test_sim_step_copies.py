@@ -31,3 +31,13 @@ def test_no_trajectory_buffer_is_copied_per_step(full_step):
     copies = [line for line in _compiled_rollout(full_step).splitlines()
               if " copy(" in line and shape.search(line.split(" copy(")[0])]
     assert copies == [], f"{len(copies)} full trajectory copies in the compiled rollout: {copies[:2]}"
+
+
+@pytest.mark.parametrize("full_step", [False, True], ids=["physics", "full-step"])
+def test_the_timed_rollout_writes_every_step_into_the_trajectory(full_step):
+    """The bench keeps the written trajectory alive, so its figures include the in-place writes (a simulator that
+    caches the current step would otherwise have them removed as dead code and time less work than Waymax)."""
+    num_timesteps = int(bench._scenes(1, OBJECTS, 5000).log_trajectory.x.shape[-1])
+    written = re.compile(rf"= f32\[{BATCH},{OBJECTS},{num_timesteps}\]\S* \S*dynamic-update-slice")
+    writes = [line for line in _compiled_rollout(full_step).splitlines() if written.search(line)]
+    assert len(writes) >= len(bench.WRITTEN_FIELDS) - 1  # every float field written (valid is a pred buffer)
