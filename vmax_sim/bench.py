@@ -50,6 +50,7 @@ from vmax_sim.datatypes import (
     Trajectory,
 )
 from vmax_sim.env import EnvConfig, make_environment
+from vmax_sim.env.chunked_vmap import chunked_vmap
 from vmax_sim.env.metrics_adapter import reference_arcs, sdc_observation, step_inputs
 from vmax_sim.evaluation.policies import sdc_action
 from vmax_sim.map_index.build import build_map_index, path_arc_length
@@ -260,7 +261,7 @@ def make_rollout(init_fn, step_fn, steps: int):
         final, outs = jax.lax.scan(body, state, None, length=steps)
         return jnp.sum(outs) + written_checksum(final.sim_trajectory)
 
-    return jax.jit(jax.vmap(episode))
+    return jax.jit(chunked_vmap(episode))
 
 
 WRITTEN_FIELDS = ("x", "y", "yaw", "vel_x", "vel_y", "valid")  # what a step writes that a user reads

@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.datatypes import SimulatorState
+from vmax_sim.env.chunked_vmap import chunked_vmap
 from vmax_sim.env.metrics_adapter import reference_arcs, sdc_observation, step_inputs
 from vmax_sim.env.multi_agent import sdc_and_agents_action
 from vmax_sim.evaluation.adversary import plan_adversary
@@ -109,7 +110,7 @@ def make_mode_rollout_fn(env, policy: Policy, metrics_config: MetricsConfig, obs
         return run_mode_episode(env, policy, mode, state, key, mode_key, metrics_config, obs_config, params,
                                 agent_fn, record_trajectory)
 
-    return jax.jit(jax.vmap(episode, in_axes=(0, 0, 0, None)))
+    return jax.jit(chunked_vmap(episode, in_axes=(0, 0, 0, None)))
 
 
 def scenario_keys(seed: int, scenario_ids: Sequence[str], batch_size: int) -> jax.Array:

@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.datatypes import SimulatorState
+from vmax_sim.env.chunked_vmap import chunked_vmap
 from vmax_sim.env.metrics_adapter import log_end_timestep, reference_arcs, sdc_observation, step_inputs
 from vmax_sim.evaluation.policies import Policy
 from vmax_sim.metrics import MetricsConfig, episode_metrics, shared_queries, step_metrics
@@ -99,4 +100,4 @@ def make_rollout_fn(env, policy: Policy, metrics_config: MetricsConfig,
     """Jitted batched episodes: states (B, ...), keys (B, 2), policy params (shared) -> Rollout, leading axis B."""
     def episode(state, key, params):
         return run_episode(env, policy, state, key, metrics_config, obs_config, params, record_trajectory)
-    return jax.jit(jax.vmap(episode, in_axes=(0, 0, None)))
+    return jax.jit(chunked_vmap(episode, in_axes=(0, 0, None)))
