@@ -257,14 +257,15 @@ def project_on_paths(path_xy: jnp.ndarray, path_valid: jnp.ndarray, path_arc: jn
     t = jnp.clip((rx * dx + ry * dy) / len_sq, 0.0, 1.0)
     ox, oy = rx - t * dx, ry - t * dy
     dist_sq = jnp.where(ok, ox * ox + oy * oy, jnp.inf)
-    is_k = jnp.arange(width - 1)[None] == argmin_packed(dist_sq, axis=1)[:, None]  # (P, width - 1) one-hot
+    k = argmin_packed(dist_sq, axis=1)[:, None]  # (P, 1) nearest segment of each window
 
-    def at_k(values):  # select by mask and sum: elementwise, no gather
-        return jnp.sum(jnp.where(is_k, values, 0.0), axis=1)
+    def at_k(values):  # (P, width - 1) -> (P,)
+        return jnp.take_along_axis(values, k, axis=1)[:, 0]
 
-    best_sq = jnp.min(dist_sq, axis=1)
+    best_sq = at_k(dist_sq)
     t_k = at_k(t)
-    arc = at_k(w_arc[:, :-1]) + t_k * (at_k(w_arc[:, 1:]) - at_k(w_arc[:, :-1]))
+    arc_k = at_k(w_arc[:, :-1])
+    arc = arc_k + t_k * (at_k(w_arc[:, 1:]) - arc_k)
     seg_len = jnp.sqrt(at_k(len_sq))
     direction = jnp.stack([at_k(dx), at_k(dy)], -1) / jnp.maximum(seg_len, 1e-6)[:, None]
     # a path with a single valid point still has a distance
