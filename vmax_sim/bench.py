@@ -50,7 +50,7 @@ from vmax_sim.datatypes import (
     Trajectory,
 )
 from vmax_sim.env import EnvConfig, make_environment
-from vmax_sim.env.chunked_vmap import chunked_vmap
+from vmax_sim.env.chunked_vmap import CPU_CHUNK, chunked_vmap
 from vmax_sim.env.metrics_adapter import reference_arcs, sdc_observation, step_inputs
 from vmax_sim.evaluation.policies import sdc_action
 from vmax_sim.map_index.build import build_map_index, path_arc_length
@@ -508,6 +508,9 @@ def format_table(results: dict) -> str:
     if index_bytes:  # one value per roadgraph size at most; the map index's shapes do not depend on it
         lines.append(f"map index bytes per scene: {', '.join(f'{b:,}' for b in index_bytes)}")
     lines += [f"skipped batch {skip['batch']}: {skip['reason']}" for skip in results.get("skipped", [])]
+    if results["device"].startswith("cpu") and any(row["batch"] > CPU_CHUNK for row in rows):
+        lines.append(f"batches above {CPU_CHUNK} ran as a loop over chunks of {CPU_CHUNK} episodes (chunked_vmap, as "
+                     "evaluation runs them on CPU)")
     if "waymax" in results:
         lines += ["", *format_waymax(results["waymax"], results["device"])]
     return "\n".join(lines)
@@ -522,7 +525,8 @@ def format_waymax(waymax: dict, device: str) -> list[str]:
     ratio = lambda value: _cell(value, "{:.2f}x")  # noqa: E731
     count = lambda value: _cell(value, "{:,}")  # noqa: E731
     lines = [f"Waymax {waymax['waymax']} (jax {waymax['jax']}, {waymax['device']}) run by {waymax['python']}",
-             "median scene-steps/s on the same scenes; physics = env step only, full = env + metrics + observation",
+             "median scene-steps/s on the same scenes; physics = env step only, full = env + metrics + observation;",
+             "both sides keep the written trajectory (bench.WRITTEN_FIELDS)",
              f"{'batch':>6}{'Waymax physics':>16}{'ours physics':>14}{'ours/Waymax':>13}{'ours full':>11}"
              f"{'ours full/Waymax physics':>26}"]
     for row in waymax["rows"]:

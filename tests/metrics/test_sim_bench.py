@@ -75,3 +75,12 @@ def test_env_both_or_minimal_times_the_real_environment_once(capsys, monkeypatch
     assert "minimal array step was removed" in capsys.readouterr().err
     with pytest.raises(ValueError, match="unknown env kind"):
         run_bench(env_kinds=("fast",))
+
+
+@pytest.mark.parametrize("batch, device, said",
+                         [(64, "cpu:cpu", True), (32, "cpu:cpu", False), (64, "gpu:H100", False)])
+def test_the_table_says_when_a_batch_ran_in_chunks(batch, device, said):
+    row = {"env": "real", "config": "env+metrics+obs", "batch": batch, "roadgraph": 30000, "compile_s": 1.0,
+           "scene_steps_per_s": 1000}
+    results = {"device": device, "num_objects": 64, "steps": 5, "configs": [row], "roadgraph_scaling": []}
+    assert ("ran as a loop over chunks of 32 episodes" in format_table(results)) == said
