@@ -17,6 +17,7 @@ import numpy as np
 
 from vmax_sim.datatypes import Action, SimulatorState
 from vmax_sim.env.environment import Environment
+from vmax_sim.env.metrics_adapter import sdc_index
 
 ObservationFn = Callable[[SimulatorState], jax.Array]  # unbatched state -> (obs_dim...) float32
 RewardFn = Callable[[SimulatorState, Action, SimulatorState], jax.Array]  # (state, action, next) -> () float32
@@ -43,7 +44,7 @@ def sdc_frame_features(state: SimulatorState) -> jax.Array:
     length, width, valid. Invalid objects are zeros.
     """
     current = state.current_sim_trajectory  # (N, 1)
-    sdc = jnp.argmax(state.object_metadata.is_sdc)
+    sdc = sdc_index(state)
     origin_x, origin_y, origin_yaw = current.x[sdc, 0], current.y[sdc, 0], current.yaw[sdc, 0]
     cos, sin = jnp.cos(origin_yaw), jnp.sin(origin_yaw)
     dx, dy = current.x[:, 0] - origin_x, current.y[:, 0] - origin_y

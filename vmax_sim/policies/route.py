@@ -14,6 +14,7 @@ import jax.numpy as jnp
 from scenariomax.schema import RG_STOP_SIGN
 from vmax_sim.datatypes import SimulatorState
 from vmax_sim.dynamics.bicycle import DT, heading_speed
+from vmax_sim.env.metrics_adapter import sdc_index
 from vmax_sim.geometry.transforms import to_local_points, wrap_angle
 from vmax_sim.map_index.query import lane_candidates, nearest_lane, project_on_paths
 
@@ -69,14 +70,9 @@ def _now(values: jax.Array, timestep: jax.Array) -> jax.Array:
     return jax.lax.dynamic_index_in_dim(values, timestep, axis=-1, keepdims=False)
 
 
-def sdc_slot(state: SimulatorState) -> jax.Array:
-    """() int32"""
-    return jnp.argmax(state.object_metadata.is_sdc).astype(jnp.int32)
-
-
 def ego_now(state: SimulatorState) -> Ego:
     """The SDC's pose, signed speed and size at the current step of one unbatched state."""
-    sim, t, i = state.sim_trajectory, state.timestep, sdc_slot(state)
+    sim, t, i = state.sim_trajectory, state.timestep, sdc_index(state)
     traj = jax.tree.map(lambda a: a[i], sim)  # (T,) fields
     speed = heading_speed(traj)  # (T,)
     before = jnp.maximum(t - 1, 0)
@@ -192,7 +188,7 @@ def project(path: RoutePath, points: jax.Array, arc_min: jax.Array | float = -1e
 
 def travelled_distance(state: SimulatorState, first_timestep: int) -> jax.Array:
     """Distance the SDC has driven since `first_timestep` (the episode's start). () float32"""
-    sim, t, i = state.sim_trajectory, state.timestep, sdc_slot(state)
+    sim, t, i = state.sim_trajectory, state.timestep, sdc_index(state)
     xy = jnp.stack([sim.x[i], sim.y[i]], -1)  # (T, 2)
     step = jnp.linalg.norm(jnp.diff(xy, axis=0), axis=-1)  # (T - 1,), step k -> k + 1
     k = jnp.arange(1, xy.shape[0])
@@ -207,7 +203,7 @@ def ego_arc_on(state: SimulatorState, path: RoutePath, ego: Ego, first_timestep:
     The window runs from start arc + 0.6 x driven - 10 m to start arc + driven + 10 m, the start arc
     being the projection of the SDC's position at `first_timestep` (a path starts at the SDC).
     """
-    sim, i = state.sim_trajectory, sdc_slot(state)
+    sim, i = state.sim_trajectory, sdc_index(state)
     start_xy = jnp.stack([sim.x[i, first_timestep], sim.y[i, first_timestep]])[None]
     start_arc = project(path, start_xy)[0][0]
     driven = travelled_distance(state, first_timestep)
@@ -311,7 +307,7 @@ def stop_sign_arc(state: SimulatorState, path: RoutePath, ego: Ego, ego_arc: jax
 
 def stopped_recently(state: SimulatorState, window_steps: int, max_speed: float) -> jax.Array:
     """The SDC's speed was below max_speed at some step of the last window_steps (now included). () bool"""
-    sim, t, i = state.sim_trajectory, state.timestep, sdc_slot(state)
+    sim, t, i = state.sim_trajectory, state.timestep, sdc_index(state)
     speed = jnp.hypot(sim.vel_x[i], sim.vel_y[i])  # (T,)
     steps = jnp.arange(speed.shape[0])
     recent = (steps <= t) & (steps > t - window_steps) & sim.valid[i]
