@@ -123,7 +123,9 @@ def test_remainder_is_dropped_or_kept(shard_dir):
 
 def test_map_index_is_built_per_scenario(shard_dir):
     pytest.importorskip("vmax_sim.map_index", reason="part B's map index is not in this checkout")
-    batch = next(iter(make_data_iterator(small_config(shard_dir, include_map_index=True, prefetch=1))))
+    batches = make_data_iterator(small_config(shard_dir, include_map_index=True, prefetch=1))
+    batch = next(batches)
+    batches.close()  # the thread building the next batch stops here, not during a later test
     leaves = [leaf for leaf in __import__("jax").tree.leaves(batch.map_index)]
     assert leaves and all(leaf.shape[0] == 3 for leaf in leaves)
 
@@ -180,3 +182,12 @@ def test_worker_processes_give_the_same_batches(shard_dir):
     for a, b in zip(serial, parallel):
         for leaf_a, leaf_b in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
             np.testing.assert_array_equal(leaf_a, leaf_b)
+
+
+def test_closing_a_prefetching_iterator_stops_its_loader_thread(shard_dir):
+    batches = make_data_iterator(small_config(shard_dir, include_map_index=True, prefetch=1, repeat=True))
+    next(batches)
+    batches.close()
+    assert not batches._thread.is_alive()  # nothing keeps building map indices after the close
+    with pytest.raises(StopIteration):
+        next(batches)

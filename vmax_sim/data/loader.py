@@ -201,8 +201,11 @@ class PrefetchIterator:
         return item
 
     def close(self) -> None:
-        """Stops the background thread (it exits at its next queue operation)."""
+        """Stops the background thread and waits for it: it finishes the batch it is building (its map
+        indices included) and exits at its next queue operation, so no work outlives the close."""
         self._stop.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join()
 
     def __del__(self) -> None:
         self._stop.set()
