@@ -88,18 +88,19 @@ def signed_edge_distance(map_index: MapIndex, points: jnp.ndarray, center_xy: jn
     segment, past a reflex one only if it is outside both.
     """
     seg, ok = edge_block(map_index, center_xy)
-    # (K, P) layout, reduced over the segments (axis 0): measured faster than (P, K) on CPU at batch 1
-    sx, sy, ex, ey = seg[0][:, None], seg[1][:, None], seg[2][:, None], seg[3][:, None]  # (K, 1)
-    px, py = points[None, :, 0], points[None, :, 1]  # (1, P)
+    # (P, K) layout, reduced over the segments (the minor axis): under vmap at batch >= 32 it vectorises over
+    # the K segments and runs 2x faster than (K, P) (which was 2x faster at batch 1; batches matter more)
+    sx, sy, ex, ey = seg[0][None], seg[1][None], seg[2][None], seg[3][None]  # (1, K)
+    px, py = points[:, 0:1], points[:, 1:2]  # (P, 1)
     dx, dy = ex - sx, ey - sy
     inv_len_sq = 1.0 / jnp.maximum(dx * dx + dy * dy, 1e-12)
-    rx, ry = px - sx, py - sy  # (K, P)
+    rx, ry = px - sx, py - sy  # (P, K)
     t = jnp.clip((rx * dx + ry * dy) * inv_len_sq, 0.0, 1.0)
     ox, oy = rx - t * dx, ry - t * dy
-    dist_sq = jnp.where(ok[:, None], ox * ox + oy * oy, jnp.inf)  # invalid slots are never among the nearest
-    best_sq = jnp.min(dist_sq, axis=0)  # (P,)
+    dist_sq = jnp.where(ok[None], ox * ox + oy * oy, jnp.inf)  # invalid slots are never among the nearest
+    best_sq = jnp.min(dist_sq, axis=1)  # (P,)
     cross = dx * ry - dy * rx  # > 0: point left of the segment (road side)
-    off_road = vertex_aware_side(dist_sq, best_sq, cross * jnp.abs(cross) * inv_len_sq, axis=0) < 0.0
+    off_road = vertex_aware_side(dist_sq, best_sq, cross * jnp.abs(cross) * inv_len_sq, axis=1) < 0.0
     best = jnp.sqrt(jnp.where(jnp.isfinite(best_sq), best_sq, 0.0))
     signed = jnp.where(off_road, best, -best)
     # no edge in the window: every point takes the host-computed distance of the centre's cell
