@@ -62,7 +62,10 @@ def forward_controlled(dynamics: DynamicsModel, action: jax.Array, current: Traj
     if bound is None or bound >= n:
         return dynamics.forward(action, current), is_controlled
     rows = first_controlled_rows(is_controlled, bound)  # (..., k)
-    take = lambda a: jnp.take_along_axis(a, rows[..., None], axis=-2)  # noqa: E731 -- (..., N, c) -> (..., k, c)
+
+    def take(a):  # (..., N, c) -> (..., k, c)
+        return jnp.take_along_axis(a, rows[..., None], axis=-2)
+
     driven = dynamics.forward(take(action), jax.tree.map(take, current))  # (..., k, 1)
     hit = rows[..., None, :] == jnp.arange(n)[:, None]  # (..., N, k): slot n is the k-th driven row
     in_rows = jnp.any(hit, axis=-1)
