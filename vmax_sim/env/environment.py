@@ -38,7 +38,7 @@ def _check_shapes(config: EnvConfig, state: SimulatorState) -> None:
 
 def controlled_bound(config: EnvConfig) -> int | None:
     """`ObjectMetadata.max_controlled` under `config.controlled`: 1 for "sdc", else no bound."""
-    return 1 if isinstance(config.controlled, str) and config.controlled == "sdc" else None
+    return 1 if config.controlled == "sdc" else None  # a mask (tuple) never equals "sdc"
 
 
 def first_controlled_rows(is_controlled: jax.Array, count: int) -> jax.Array:
