@@ -29,7 +29,7 @@ class _OneLineErrors(click.Group):
 
 
 @click.group(cls=_OneLineErrors)
-@click.version_option(package_name="vmax")
+@click.version_option(package_name="vmax", prog_name="scenariomax")
 def main() -> None:
     """Convert driving datasets into V-Max shards, inspect and validate them."""
 
@@ -104,6 +104,18 @@ def _pipeline_options(fn):
     return fn
 
 
+def _synthetic_knobs(ctx, param, items):
+    """--synthetic-knob NAME=VALUE (repeatable) -> SyntheticKnobs, or None when none is given."""
+    if not items:
+        return None
+    from scenariomax.sources.synthetic.knobs import SyntheticKnobs
+
+    try:
+        return SyntheticKnobs.from_items(items)
+    except ValueError as error:
+        raise click.BadParameter(str(error).splitlines()[0], ctx=ctx, param=param) from None
+
+
 @main.command()
 @click.option("--dataset", type=click.Choice(list(DATASETS)),
               default="synthetic", show_default=True)
@@ -112,20 +124,31 @@ def _pipeline_options(fn):
 @click.option("--maps", default=None, help="nuPlan maps root (default $NUPLAN_MAPS_ROOT).")
 @click.option("--num-scenarios", type=int, default=100, show_default=True, help="Synthetic: how many.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Synthetic: random seed.")
+@click.option("--synthetic-knob", "knobs", multiple=True, metavar="NAME=VALUE", callback=_synthetic_knobs,
+              help="Synthetic: a randomisation knob (repeatable; ranges as lo:hi), e.g. traffic_density=2, "
+                   "position_noise_m=0.3, lane_width_m=2.8:4.2, speed_limit_scale=1.2, driver_style_spread=1.5, "
+                   "parked_fraction=0:0.3, topology_weights=intersection4:2,merge:1.")
 @click.option("--stride-steps", type=int, default=None, help="nuPlan: also cut a scenario every N steps.")
 @click.option("--num-objects", type=int, default=128, show_default=True, help="Object slots per scenario.")
 @click.option("--roadgraph-points", type=int, default=30000, show_default=True, help="Roadgraph points.")
 @click.option("--no-enrich", is_flag=True, help="Skip enrichment (paths, controllable labels, lights).")
 @_pipeline_options
-def convert(dataset, src, maps, num_scenarios, seed, stride_steps, num_objects, roadgraph_points, no_enrich,
+def convert(dataset, src, maps, num_scenarios, seed, knobs, stride_steps, num_objects, roadgraph_points, no_enrich,
             out, workers, shard_size, resume, overwrite, split, engine, address, num_paths, points_per_path):
     """Convert a dataset (or generate synthetic scenarios) into shards + manifest.json."""
+    import dataclasses
+
     from scenariomax.sources.registry import make_source
+
+    if knobs is not None and dataset != "synthetic":
+        raise click.UsageError(f"--synthetic-knob applies to --dataset synthetic, not {dataset}")
 
     sizes = Sizes(num_objects=num_objects, num_roadgraph=roadgraph_points, num_paths=num_paths,
                   num_points_per_path=points_per_path)
     source = make_source(dataset, src=src, sizes=sizes, num_scenarios=num_scenarios, seed=seed, maps=maps,
                          stride_steps=stride_steps)
+    if knobs is not None:
+        source = dataclasses.replace(source, knobs=knobs)
     _run_conversion(source, out, workers, shard_size, resume, overwrite, split, engine, address, sizes,
                     not no_enrich, num_paths, points_per_path)
 
@@ -171,24 +194,36 @@ def inspect(path, as_json, render, scenario_id, max_records):
 
 
 @main.command()
-@click.argument("path")
+@click.argument("paths", nargs=-1, required=True, metavar="PATH...")
 @click.option("--deep", is_flag=True, help="Also check every value against plausible physical ranges "
                                            "(docs/validate.md).")
-def validate(path, deep):
-    """Exit 0 if every record matches the schema and the folder is the complete output its manifest.json
-    lists (shards, record counts, sha256, unique scenario ids); else one line per problem and exit 1."""
-    from scenariomax.validate import format_bad, validate_shards
+def validate(paths, deep):
+    """Exit 0 if every record under each PATH matches the schema and each folder is the complete output its
+    manifest.json lists (shards, record counts, sha256, unique scenario ids); else one line per problem and
+    exit 1. The problems and the verdict go to stdout (they are the command's output), warnings to stderr."""
+    from scenariomax.validate import combine_reports, find_files_to_check, format_bad, validate_shards
 
-    report = validate_shards(path, deep=deep)
-    for entry in report.bad:
-        click.echo(format_bad(entry))
-    for warning in report.warnings:
-        click.echo(f"warning: {warning}", err=True)
+    for path in paths:  # a missing or empty path is a one-line error before any long validation starts
+        find_files_to_check(path)
+    reports = []
+    for path in paths:
+        report = validate_shards(path, deep=deep)
+        for entry in report.bad:
+            click.echo(format_bad(entry))
+        for warning in report.warnings:
+            click.echo(f"warning: {warning}", err=True)
+        reports.append(report)
+    total = combine_reports(reports)
+    click.echo(_validation_verdict(total))
+    sys.exit(0 if total.ok else 1)
+
+
+def _validation_verdict(report) -> str:
+    """`N records in M files: all valid` (or `: K problems`), noting when a folder had no manifest to check."""
     verdict = f"{len(report.bad)} problems" if report.bad else "all valid"
     if report.warnings and not report.bad:
         verdict += " (completeness not checked: no manifest.json)"
-    click.echo(f"{report.num_records} records in {report.num_files} files: {verdict}", err=True)
-    sys.exit(1 if report.bad else 0)
+    return f"{report.num_records} records in {report.num_files} files: {verdict}"
 
 
 @main.command()

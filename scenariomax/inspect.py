@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from scenariomax.errors import InputError
+from scenariomax.io.skim import skim_scenario_id
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes, load_schema
 from scenariomax.validate import (
@@ -293,8 +294,6 @@ def inspection_ok(stats: dict) -> bool:
 def scenario_ids(files: list[Path]) -> Iterator[str]:
     """The scenario id of every record in `files` ("" where none), skimmed without decoding or CRC checks:
     a lookup, fast even for large shards. A file stops at its first damaged frame."""
-    from scenariomax.view.index import skim_scenario_id  # imported here: the viewer's index imports this module
-
     for file in files:
         try:
             with open(file, "rb") as stream:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import NamedTuple
 
@@ -484,6 +484,14 @@ def validate_shards(path: str | os.PathLike, deep: bool = False) -> ValidationRe
                             warnings=findings.warnings)
 
 
+def combine_reports(reports: Sequence[ValidationReport]) -> ValidationReport:
+    """One report for several validated paths: records and files summed, problems and warnings in path order."""
+    return ValidationReport(num_records=sum(r.num_records for r in reports),
+                            num_files=sum(r.num_files for r in reports),
+                            bad=tuple(entry for r in reports for entry in r.bad),
+                            warnings=tuple(warning for r in reports for warning in r.warnings))
+
+
 def format_bad(entry: BadRecord) -> str:
     """One line naming the file once: where (record and scenario id when known) and what."""
     prefix = f"{entry.file}: "
@@ -515,6 +523,7 @@ __all__ = [
     "ValidationReport",
     "check_features",
     "check_record",
+    "combine_reports",
     "duplicate_problem",
     "find_files_to_check",
     "format_bad",

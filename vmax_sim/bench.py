@@ -490,8 +490,34 @@ def compare_with_waymax(waymax: dict, rows: list[dict]) -> dict:
         "rows": compared, "skipped": waymax.get("skipped", [])}
 
 
+def _row_key(row: dict) -> tuple:
+    return row.get("env"), row["config"], row["batch"], row["roadgraph"]
+
+
+def table_rows(results: dict) -> list[dict]:
+    """Every timed configuration, then the roadgraph-scaling rows not among them: run_bench reuses the full step
+    it timed at the largest roadgraph for that size's scaling row, which would otherwise be printed twice."""
+    rows = list(results["configs"])
+    seen = {_row_key(row) for row in rows}
+    for row in results["roadgraph_scaling"]:
+        if _row_key(row) not in seen:
+            rows.append(row)
+            seen.add(_row_key(row))
+    return rows
+
+
+def table_legend(with_peak: bool) -> list[str]:
+    """What the columns measure, under the table."""
+    peak = "; peak MB: the device allocator's peak so far" if with_peak else ""
+    return ["scene-steps/s: scenes x steps simulated per second of wall time, best timed run (median: the median run)",
+            "env: real = make_environment's Environment; config: env = its step alone, +obs / +metrics add the SDC's "
+            "observation / the step metrics",
+            f"compile s: compiling the jitted rollout; MB/scene: one scene's state on the device, map index "
+            f"included{peak}"]
+
+
 def format_table(results: dict) -> str:
-    rows = results["configs"] + results["roadgraph_scaling"]
+    rows = table_rows(results)
     with_peak = any("device_peak_bytes" in row for row in rows)
     lines = [f"device: {results['device']}  objects: {results['num_objects']}  steps: {results['steps']}",
              f"{'env':<9}{'config':<18}{'batch':>6}{'roadgraph':>10}{'compile s':>10}{'scene-steps/s':>15}"
@@ -504,6 +530,7 @@ def format_table(results: dict) -> str:
         if with_peak:
             line += f"{_cell(row.get('device_peak_bytes'), '{:,.0f}', 1e-6):>10}"
         lines.append(line)
+    lines += table_legend(with_peak)
     index_bytes = sorted({row["map_index_bytes_per_scene"] for row in rows if "map_index_bytes_per_scene" in row})
     if index_bytes:  # one value per roadgraph size at most; the map index's shapes do not depend on it
         lines.append(f"map index bytes per scene: {', '.join(f'{b:,}' for b in index_bytes)}")

@@ -12,7 +12,7 @@ from scenariomax.codec import SchemaError, decode_scenario
 from scenariomax.errors import InputError
 from scenariomax.io.example import ExampleError
 from scenariomax.io.record_kind import WOMD_SCENARIO_NOT_A_SHARD, looks_like_womd_scenario
-from scenariomax.io.tfrecord import RecordError, iter_records
+from scenariomax.io.tfrecord import RecordError, iter_record_spans, iter_records
 from scenariomax.shards import list_shard_files
 from scenariomax.sources.base import Failure, UnitItem
 
@@ -48,6 +48,22 @@ class ShardRecordsSource:
 
     def settings(self) -> dict:
         return {"src": self.src}
+
+    def expected_num_scenarios(self) -> int:
+        """Records in the input files, from their length headers (the data is skipped): the progress display
+        counts scenarios of this total rather than input files, which can hold thousands of records each."""
+        return sum(readable_records(unit) for unit in self.list_units())
+
+
+def readable_records(path: str) -> int:
+    """Records `read_unit` can reach in a file: up to its first damaged frame (0 when it cannot be opened)."""
+    count = 0
+    try:
+        for _ in iter_record_spans(path):
+            count += 1
+    except (RecordError, OSError):
+        pass  # read_unit reports the damage; the records before it still count
+    return count
 
 
 def _refuse_raw_womd_scenarios(unit: str) -> None:

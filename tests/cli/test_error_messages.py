@@ -49,7 +49,7 @@ def test_a_bad_input_file_is_named_once_in_its_failure_line(bad_inputs, tmp_path
 def test_validate_names_a_non_tfrecord_file_once(bad_inputs):
     result = CliRunner().invoke(scenariomax_main, ["validate", str(bad_inputs["text"])])
     assert result.exit_code == 1
-    # validate lists the bad records on stdout (they are its output), the count on stderr
+    # validate lists the bad records and its verdict on stdout (they are its output)
     (line,) = [line for line in result.stdout.splitlines() if str(bad_inputs["text"]) in line]
     assert line == f"{bad_inputs['text']}: not a TFRecord file (its first 12 bytes are not a record header)"
 

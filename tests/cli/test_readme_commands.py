@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import re
+import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -37,3 +39,27 @@ def test_each_readme_command_runs_with_help_and_has_its_options(program, command
     assert result.exit_code == 0, f"`{program} {command} --help` failed: {result.output}"
     for option in options:
         assert option in result.output, f"`{program} {command}` has no {option} (named in the README)"
+
+
+def test_the_readme_names_every_dataset_convert_accepts_and_no_other():
+    from scenariomax.sources.registry import DATASETS
+
+    named = set()
+    for choice in re.findall(r"--dataset (\{[a-z0-9_,]+\}|[a-z0-9_]+)", README.read_text()):
+        named.update(choice.strip("{}").split(","))
+    assert named == set(DATASETS)
+
+
+# What the README's commands write inside a checkout (convert --out shards/, view, vmax-sim view, train/demo).
+README_OUTPUTS = ("shards/train-00000-of-00001.tfrecord", "view.html", "rollouts.html", "runs/demo/config.json")
+
+
+def test_what_the_readme_commands_write_is_git_ignored():
+    repo = README.parent
+    if shutil.which("git") is None or not (repo / ".git").exists():
+        pytest.skip("not a git checkout")
+    text = README.read_text()
+    assert all(output.split("/")[0] in text for output in README_OUTPUTS)
+    done = subprocess.run(["git", "check-ignore", "--no-index", *README_OUTPUTS], cwd=repo, capture_output=True,
+                          text=True, check=False)
+    assert sorted(done.stdout.split()) == sorted(README_OUTPUTS), done.stderr

@@ -56,6 +56,49 @@ def test_validate_reports_a_damaged_file_in_one_line(synthetic_shards, tmp_path)
     assert "broken.tfrecord" in result.output and "Traceback" not in result.output
 
 
+def test_validate_takes_several_paths_and_prints_one_verdict_on_stdout(synthetic_shards, tmp_path):
+    result = CliRunner().invoke(main, ["validate", str(synthetic_shards), str(synthetic_shards)])
+    assert result.exit_code == 0, result.output
+    assert result.stdout.splitlines() == ["12 records in 4 files: all valid"]
+    assert "records in" not in result.stderr
+
+
+def test_validate_exits_1_when_any_of_its_paths_has_a_bad_record(synthetic_shards, tmp_path):
+    shard = next(synthetic_shards.glob("*.tfrecord"))
+    broken = tmp_path / "broken.tfrecord"
+    broken.write_bytes(shard.read_bytes()[:5000])
+    result = CliRunner().invoke(main, ["validate", str(synthetic_shards), str(broken)])
+    assert result.exit_code == 1
+    *problems, verdict = result.stdout.splitlines()
+    assert len(problems) == 1 and problems[0].startswith(f"{broken}: ")
+    assert verdict == "6 records in 3 files: 1 problems"
+
+
+def test_validate_names_an_unreadable_path_in_one_line_before_validating_the_others(synthetic_shards, tmp_path):
+    result = CliRunner().invoke(main, ["validate", str(synthetic_shards), str(tmp_path / "nope")])
+    assert result.exit_code == 1
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("Error:") and "nope" in lines[0]
+
+
+def test_build_sdc_paths_counts_its_progress_in_scenarios_of_the_input_records(synthetic_shards, tmp_path):
+    result = CliRunner().invoke(main, ["build-sdc-paths", str(synthetic_shards), "--out", str(tmp_path / "out"),
+                                       "--workers", "1", "--num-paths", "4", "--points-per-path", "50"])
+    assert result.exit_code == 0, result.output
+    assert "converting: 6/6 scenarios (100%)" in result.stderr, result.stderr
+
+
+def test_the_records_source_expects_the_records_before_a_damaged_frame(synthetic_shards, tmp_path):
+    from scenariomax.sources.shard_records import ShardRecordsSource
+
+    first, second = sorted(synthetic_shards.glob("*.tfrecord"))  # 4 and 2 records
+    data = first.read_bytes()
+    (tmp_path / "a.tfrecord").write_bytes(second.read_bytes())
+    (tmp_path / "b.tfrecord").write_bytes(data[:len(data) - 100])  # the last of its 4 records cut short
+    assert ShardRecordsSource(src=str(synthetic_shards)).expected_num_scenarios() == 6
+    assert ShardRecordsSource(src=str(tmp_path / "*.tfrecord")).expected_num_scenarios() == 2 + 3
+
+
 def test_missing_input_is_a_one_line_error(tmp_path):
     result = _run("convert", "--dataset", "womd", "--src", tmp_path / "nope", "--out", tmp_path / "o")
     assert result.exit_code == 1

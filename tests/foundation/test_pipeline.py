@@ -10,7 +10,7 @@ import pytest
 
 from scenariomax import Sizes, read_shards
 from scenariomax.pipeline import ConversionError, ConvertSettings, convert
-from tests.foundation.toy_source import ToySource
+from tests.foundation.toy_source import CountedToySource, ToySource
 
 SIZES = Sizes(num_objects=8, num_roadgraph=2000, num_lanes=4)
 ROOT = Path(__file__).resolve().parents[2]
@@ -22,6 +22,15 @@ def _settings(out, **kw):
 
 def _shard_bytes(out: Path) -> dict:
     return {p.name: p.read_bytes() for p in sorted(out.glob("*.tfrecord"))}
+
+
+def test_progress_in_scenarios_counts_the_ones_that_failed_one_by_one(tmp_path, capsys):
+    # 6 units x 4 = 24 expected; one fails in the source, one in validation (NaN), one unit is unreadable
+    source = CountedToySource(bad_scenarios=((2, 0),), broken_units=(5,))
+    result = convert(source, ConvertSettings(out=tmp_path / "o", sizes=SIZES, shard_size=5, workers=1))
+    assert result.num_scenarios == 18
+    # the unreadable unit's 4 scenarios never settle: 18 written + 2 failed one by one
+    assert "converting: 20/24 scenarios" in capsys.readouterr().err
 
 
 def test_conversion_writes_shards_and_manifest(tmp_path):
@@ -71,7 +80,7 @@ sys.path.insert(0, {root!r})
 from pathlib import Path
 from scenariomax import Sizes
 from scenariomax.pipeline import ConvertSettings, convert
-from tests.foundation.toy_source import ToySource
+from tests.foundation.toy_source import CountedToySource, ToySource
 if __name__ == "__main__":  # worker processes re-import this module
     source = ToySource(num_units=8, per_unit=4, delay_s=float(sys.argv[2]))
     convert(source, ConvertSettings(out=Path(sys.argv[1]), sizes=Sizes(num_objects=8, num_roadgraph=2000, num_lanes=4),

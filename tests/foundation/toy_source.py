@@ -40,3 +40,11 @@ class ToySource:
 
     def settings(self) -> dict:
         return {"num_units": self.num_units, "per_unit": self.per_unit}
+
+
+@dataclasses.dataclass(frozen=True)
+class CountedToySource(ToySource):
+    """A ToySource that announces its total, as the synthetic and records sources do: progress in scenarios."""
+
+    def expected_num_scenarios(self) -> int:
+        return self.num_units * self.per_unit

@@ -153,3 +153,15 @@ def test_roadgraph_scaling_reuses_the_full_step_already_timed(monkeypatch):
                         configs=("env+metrics+obs",))
     assert [(args[0], args[2]) for args in calls] == [(32, 2000), (32, 1000)]  # batch, roadgraph: no third run
     assert [row["roadgraph"] for row in results["roadgraph_scaling"]] == [1000, 2000]
+
+
+def test_the_table_prints_each_timed_row_once_and_explains_its_columns(monkeypatch, capsys):
+    monkeypatch.setattr(bench, "_timed", _stub_row)
+    run_bench(batch_sizes=(32,), num_objects=16, roadgraph_sizes=(1000, 2000), steps=2, configs=("env+metrics+obs",))
+    table = capsys.readouterr().out
+    rows = [line for line in table.splitlines() if line.startswith("real")]
+    assert len(rows) == len(set(rows)) == 2  # the full step at 2000 points is the scaling row for 2000 as well
+    legend = table.split(rows[-1], 1)[1]
+    for said in ("scene-steps/s: scenes x steps simulated per second", "median", "config: env =", "compile s:",
+                 "MB/scene:"):
+        assert said in legend

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from types import SimpleNamespace
 
 import pytest
 from click.testing import CliRunner
@@ -46,6 +47,23 @@ def test_unknown_entries_and_missing_data_are_one_line_errors(tmp_path):
     result = CliRunner().invoke(main, ["evaluate", "--policy", "idm,pdm"])
     assert result.exit_code == 2 and result.output.startswith("error: --data is required")
     assert len(result.output.strip().splitlines()) == 1
+
+
+def test_run_directories_go_to_the_run_evaluator_the_caller_passes(tmp_path):
+    # evaluation does not import training (above it): a run directory needs the evaluator from the caller
+    run = tmp_path / "run"
+    run.mkdir()
+    with pytest.raises(ValueError, match=r"run: a training run directory; .*run_evaluator="):
+        compare_policies([str(run)], None, progress=False)
+    calls = []
+
+    def fake_evaluate_run(entry, data, **kwargs):
+        calls.append((entry, data, kwargs["num_scenarios"]))
+        return SimpleNamespace(summary={"policy": "sac-mlp@run", "num_episodes": 2})
+
+    (column,) = compare_policies([str(run)], None, num_scenarios=2, progress=False, print_fn=lambda line: None,
+                                 run_evaluator=fake_evaluate_run)
+    assert calls == [(str(run), None, 2)] and column.name == "sac-mlp@run"
 
 
 def test_cli_compares_two_policies_and_writes_the_report(policy_shards, tmp_path):

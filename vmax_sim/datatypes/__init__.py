@@ -1,6 +1,6 @@
 """Immutable pytree dataclasses (arrays only) that the simulator passes around."""
 
-from vmax_sim.datatypes.action import Action
+from vmax_sim.datatypes.action import Action, sdc_action
 from vmax_sim.datatypes.object_metadata import ObjectMetadata
 from vmax_sim.datatypes.paths import Paths
 from vmax_sim.datatypes.roadgraph import RoadgraphPoints
@@ -27,6 +27,7 @@ __all__ = [
     "TrafficLights",
     "Trajectory",
     "fill_invalid",
+    "sdc_action",
     "select_timestep",
     "stack_fields",
     "update_timestep",

@@ -20,11 +20,10 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from vmax_sim.datatypes import SimulatorState
+from vmax_sim.datatypes import SimulatorState, sdc_action
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.environment import Environment
 from vmax_sim.env.metrics_adapter import reference_arcs, sdc_index, sdc_observation, step_inputs
-from vmax_sim.evaluation.policies import sdc_action
 from vmax_sim.metrics import MetricsConfig, SharedQueries, shared_queries, step_metrics
 from vmax_sim.observation import Observation, ObservationConfig
 from vmax_sim.rewards import RewardConfig, check_reward_config, compute_reward

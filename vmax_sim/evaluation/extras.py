@@ -33,7 +33,7 @@ class EvaluationExtras:
     gallery: GalleryCollector | None = None
     gallery_dir: Path | None = None
     difficulty: DifficultyCollector | None = None
-    view: object | None = None  # a vmax_sim.visualization.view.RolloutCollector
+    view: object | None = None  # a vmax_sim.evaluation.rollout_view.RolloutCollector
     view_file: Path | None = None
 
     @classmethod
@@ -41,7 +41,7 @@ class EvaluationExtras:
                difficulty: bool = False, view_file: str | None = None, view_max: int = 8) -> EvaluationExtras:
         view = None
         if view_file:
-            from vmax_sim.visualization.view import RolloutCollector
+            from vmax_sim.evaluation.rollout_view import RolloutCollector
 
             view = RolloutCollector(view_max, prefer_failures=True)
         return cls(gallery=GalleryCollector(gallery_max, gallery_passed) if gallery_dir else None,
@@ -72,7 +72,7 @@ class EvaluationExtras:
             if show_tables:
                 print_fn(f"wrote the failure gallery {index}")
         if self.view is not None and data:
-            from vmax_sim.visualization.view import write_collected_view
+            from vmax_sim.evaluation.rollout_view import write_collected_view
 
             result = write_collected_view(self.view, [run.name for run in runs], data, self.view_file, mode_name)
             print_fn(f"wrote the rollout viewer {result.out} ({result.num_embedded} scenario(s), failed first)")

@@ -1,32 +1,22 @@
 """Policies for evaluation: the log expert, a constant-velocity baseline, and user callables.
 
-A `Policy` maps (params, state, observation or None, key) to an `Action` for every object of one
-unbatched scenario, in the environment's action convention; the environment applies it to the
-objects it controls. `params` is whatever the policy was trained to (None for rule-based ones); it
-is an argument of the jitted rollout, so evaluating new parameters never recompiles.
+A `Policy` (vmax_sim.policies.base) maps (params, state, observation or None, key) to an `Action` for every
+object of one unbatched scenario; `make_policy` turns a name, a `Policy` or a callable into one. `Policy`,
+`ActionFn` and `sdc_action` live below evaluation (the rule policies and the learning environment use them
+too) and are re-exported here, where they were first defined.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import inspect
 from collections.abc import Callable
 
-import jax
 import jax.numpy as jnp
 
-from vmax_sim.datatypes import Action, SimulatorState
-from vmax_sim.observation import Observation
+from vmax_sim.datatypes import Action, sdc_action
+from vmax_sim.policies.base import ActionFn, Policy
 
-ActionFn = Callable[[object, SimulatorState, "Observation | None", jax.Array], Action]
 POLICY_NAMES = ("expert", "constant", "idm", "pdm", "random")
-
-
-@dataclasses.dataclass(frozen=True)
-class Policy:
-    name: str
-    action_fn: ActionFn  # (params, state (), observation or None, key) -> Action (N, action_dim)
-    needs_observation: bool = False  # build an Observation each step for it
 
 
 def expert_policy(env) -> Policy:
@@ -47,13 +37,6 @@ def constant_policy(env) -> Policy:
         return Action(data=zero, valid=jnp.ones((num_objects, 1), bool))
 
     return Policy("constant", action_fn)
-
-
-def sdc_action(state: SimulatorState, action: jax.Array) -> Action:
-    """Puts one (action_dim,) action in the SDC's slot of a full Action (any leading batch dims)."""
-    is_sdc = state.object_metadata.is_sdc  # (..., N)
-    data = jnp.where(is_sdc[..., None], jnp.asarray(action, jnp.float32)[..., None, :], 0.0)
-    return Action(data=data, valid=is_sdc[..., None])
 
 
 def callable_policy(fn: Callable, name: str | None = None, inputs: str = "observation") -> Policy:
@@ -92,3 +75,7 @@ def make_policy(policy, env) -> Policy:
             raise ValueError(f"a policy callable takes (observation, key); {policy!r} takes {num_params} arguments")
         return callable_policy(policy)
     raise ValueError(f"a policy is a name {POLICY_NAMES}, a Policy or a callable, got {type(policy).__name__}")
+
+
+__all__ = ["POLICY_NAMES", "ActionFn", "Policy", "callable_policy", "constant_policy", "expert_policy",
+           "make_policy", "sdc_action"]

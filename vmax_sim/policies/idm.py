@@ -21,10 +21,10 @@ import jax
 import jax.numpy as jnp
 
 from scenariomax.schema import TL_ARROW_CAUTION, TL_ARROW_STOP, TL_CAUTION, TL_FLASHING_STOP, TL_STOP
-from vmax_sim.datatypes import Action, SimulatorState
+from vmax_sim.datatypes import Action, SimulatorState, sdc_action
 from vmax_sim.dynamics.bicycle import ACCEL_BOUNDS, CURVATURE_BOUNDS, DT
-from vmax_sim.evaluation.policies import Policy, sdc_action
 from vmax_sim.geometry.transforms import to_local_points
+from vmax_sim.policies.base import Policy
 from vmax_sim.policies.route import (
     Ego,
     Objects,

@@ -35,7 +35,6 @@ import jax.numpy as jnp
 
 from scenariomax.schema import OBJECT_TYPE_PEDESTRIAN
 from vmax_sim.datatypes import SimulatorState
-from vmax_sim.evaluation.policies import Policy
 from vmax_sim.geometry.transforms import to_local_points, vector_length
 from vmax_sim.map_index.query import lane_candidates
 from vmax_sim.metrics import (
@@ -49,6 +48,7 @@ from vmax_sim.metrics import (
     time_to_collision,
 )
 from vmax_sim.metrics.step import sdc_box_at
+from vmax_sim.policies.base import Policy
 from vmax_sim.policies.idm import (
     IDMConfig,
     Scene,

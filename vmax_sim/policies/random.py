@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.datatypes import Action
-from vmax_sim.evaluation.policies import Policy
+from vmax_sim.policies.base import Policy
 
 
 def random_policy(env) -> Policy:

@@ -13,8 +13,9 @@ from vmax_sim.training.config import (
 )
 from vmax_sim.training.replay import TransitionReplay, replay_add, replay_init, replay_sample
 from vmax_sim.training.run import TrainResult, load_run_config, train
+from vmax_sim.training.run_policy import LoadedPolicy, evaluate_run, load_trained_policy
 
-__all__ = ["LoopConfig", "ReplayBuffer", "TrainConfig", "TrainDataConfig", "TrainResult", "TransitionReplay",
-           "apply_overrides", "buffer_add", "buffer_init", "buffer_sample", "config_from_dict", "config_to_dict",
-           "load_run_config", "preset_config", "replay_add", "replay_init", "replay_sample", "train",
-           "transition_bytes"]
+__all__ = ["LoadedPolicy", "LoopConfig", "ReplayBuffer", "TrainConfig", "TrainDataConfig", "TrainResult",
+           "TransitionReplay", "apply_overrides", "buffer_add", "buffer_init", "buffer_sample", "config_from_dict",
+           "config_to_dict", "evaluate_run", "load_run_config", "load_trained_policy", "preset_config", "replay_add",
+           "replay_init", "replay_sample", "train", "transition_bytes"]

@@ -1,0 +1,93 @@
+"""A training run directory as an evaluation policy: its checkpoint loaded, evaluated with its own settings.
+
+This is training's side of evaluation: it reads the run's configuration and rebuilds its learner
+(`vmax_sim.training.run`), so it sits above `vmax_sim.evaluation`, which only receives `evaluate_run` (as
+`compare_policies(..., run_evaluator=evaluate_run)`) and never imports training.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+
+from scenariomax.errors import InputError
+from scenariomax.progress import Progress
+from vmax_sim.evaluation.evaluate import evaluate
+from vmax_sim.evaluation.report import expected_num_scenarios
+from vmax_sim.evaluation.trained import trained_policy
+from vmax_sim.map_index.structure import MapIndexConfig
+from vmax_sim.observation import LIGHT_FEATURES, OBJECT_FEATURES, ROADGRAPH_FEATURES, Observation
+from vmax_sim.policies.base import Policy
+from vmax_sim.training.checkpoint import CheckpointStore
+from vmax_sim.training.run import components, data_config, load_run_config, resolve_data
+
+
+@dataclasses.dataclass(frozen=True)
+class LoadedPolicy:
+    policy: Policy
+    params: object
+    config: object  # the run's TrainConfig
+    env_steps: int  # checkpoint step the parameters come from
+
+
+def load_trained_policy(run_dir: str | Path, step: int | None = None) -> LoadedPolicy:
+    """The policy of a training run directory at its latest (or the given) checkpoint."""
+    run_dir = Path(run_dir)
+    config = load_run_config(run_dir)
+    store = CheckpointStore(run_dir / "checkpoints")
+    step = store.latest_step() if step is None else step
+    if step is None:
+        raise InputError(f"{run_dir}: the run has no checkpoint yet")
+    env, learner = components(config)
+    example = _example_observation(config, env)
+    like = jax.eval_shape(learner.init, jax.random.PRNGKey(0), example)
+    try:
+        state = store.restore_learner(step, like)
+    except (ValueError, KeyError) as error:
+        raise InputError(f"{run_dir}: checkpoint {step} does not match this version's {config.algo} / "
+                         f"{config.network.name} networks ({str(error)[:120]})") from None
+    name = f"{config.algo}-{config.network.name}@{run_dir.name}"
+    return LoadedPolicy(policy=trained_policy(learner, name), params=learner.policy_params(state), config=config,
+                        env_steps=int(step))
+
+
+def _example_observation(config, env):
+    """A batch-of-one observation shaped as the run's (zeros; only shapes matter for init)."""
+    obs = config.obs
+    points = obs.num_roadgraph_points or _window_points(config)
+    k, n = obs.num_history, obs.num_objects
+    zeros = jnp.zeros
+    return Observation(
+        sdc=zeros((1, k, 6)), sdc_valid=zeros((1, k), bool), objects=zeros((1, n, k, OBJECT_FEATURES)),
+        objects_valid=zeros((1, n, k), bool), roadgraph=zeros((1, points, ROADGRAPH_FEATURES)),
+        roadgraph_valid=zeros((1, points), bool), lights=zeros((1, obs.num_lights, LIGHT_FEATURES)),
+        lights_valid=zeros((1, obs.num_lights), bool), path_targets=zeros((1, obs.num_path_targets, 2)),
+        path_targets_valid=zeros((1, obs.num_path_targets), bool))
+
+
+def _window_points(config) -> int:
+    return config.obs.roadgraph_window ** 2 * MapIndexConfig().obs_slots_per_cell
+
+
+def evaluate_run(run_dir: str | Path, data: str | None = None, mode: str = "non_reactive",
+                 num_scenarios: int | None = None, batch_size: int = 8, step: int | None = None, on_batch=None,
+                 progress: bool = False):
+    """Evaluates a training run's policy on `data` (default: the run's held-out split), with the run's
+    observation and environment settings. `progress`: the scenarios done of the total on stderr."""
+    loaded = load_trained_policy(run_dir, step)
+    config = loaded.config
+    # notes go to stderr: stdout may be carrying `evaluate --json`
+    path = data or resolve_data(config, lambda line: print(line, file=sys.stderr))[1]
+    total = expected_num_scenarios(path, num_scenarios) if progress else None
+    with Progress(f"evaluating {Path(run_dir).name}", total, "scenarios", enabled=progress) as shown:
+        return evaluate(loaded.policy, data_config(config, path, batch_size=batch_size), mode=mode,
+                        env_config=components(config)[0].env_config,
+                        obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params,
+                        on_batch=on_batch, progress=shown)
+
+
+__all__ = ["LoadedPolicy", "evaluate_run", "load_trained_policy"]
