@@ -3,7 +3,8 @@
 Road networks are built from blocks (straight streets, bends, 3- and 4-way junctions with signal
 phases or stop signs, on-ramp merges, lane drops, roundabouts); traffic is simulated on them (IDM car
 following, junction reservations, signals, stop signs, pedestrians on crosswalks, cyclists,
-parked cars). Everything is deterministic in (seed, index).
+parked cars). Everything is deterministic in (seed, index); `SyntheticKnobs` randomise the scenes
+(traffic density, tracking noise, lane widths, speed limits, driver styles, parked cars, topology mix).
 """
 
 from scenariomax.sources.synthetic.checks import (
@@ -13,6 +14,7 @@ from scenariomax.sources.synthetic.checks import (
                                                   road_edge_signed_distance,
 )
 from scenariomax.sources.synthetic.generator import GenerationError, generate_scenario, scenario_id
+from scenariomax.sources.synthetic.knobs import SyntheticKnobs
 from scenariomax.sources.synthetic.network import Crosswalk, Lane, RoadNetwork
 from scenariomax.sources.synthetic.source import SyntheticSource
 from scenariomax.sources.synthetic.topologies import TOPOLOGIES, build_network
@@ -24,6 +26,7 @@ __all__ = [
                                                   "GenerationError",
                                                   "Lane",
                                                   "RoadNetwork",
+                                                  "SyntheticKnobs",
                                                   "SyntheticSource",
                                                   "Traffic",
                                                   "build_network",

@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 
 from scenariomax.schema import OBJECT_TYPE_CYCLIST, OBJECT_TYPE_PEDESTRIAN, OBJECT_TYPE_VEHICLE
+from scenariomax.sources.synthetic.knobs import DEFAULT_KNOBS, SyntheticKnobs
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,9 +49,20 @@ def pedestrian_body(rng: np.random.Generator) -> Body:
                 float(rng.uniform(1.5, 1.9)))
 
 
-def vehicle_driver(rng: np.random.Generator) -> Driver:
-    return Driver(float(rng.uniform(0.85, 1.1)), float(rng.uniform(1.5, 2.5)), float(rng.uniform(1.8, 2.6)),
-                  float(rng.uniform(1.0, 1.8)))
+# A vehicle driver's traits, in Driver's order: the range each is drawn from, and the floor and ceiling
+# that keep it physically sensible when knobs.driver_style_spread widens the spread around the range's centre.
+VEHICLE_TRAITS: tuple[tuple[tuple[float, float], tuple[float, float]], ...] = (
+    ((0.85, 1.1), (0.3, 1.6)),  # speed_factor
+    ((1.5, 2.5), (0.5, 4.0)),  # max_accel
+    ((1.8, 2.6), (0.8, 5.0)),  # comfort_decel
+    ((1.0, 1.8), (0.3, 3.5)),  # time_headway
+)
+
+
+def vehicle_driver(rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> Driver:
+    draws = [float(rng.uniform(*drawn)) for drawn, _ in VEHICLE_TRAITS]
+    return Driver(*(knobs.spread(draw, sum(drawn) / 2, limits)
+                    for draw, (drawn, limits) in zip(draws, VEHICLE_TRAITS)))
 
 
 def cyclist_driver(rng: np.random.Generator, speed_limit: float) -> Driver:

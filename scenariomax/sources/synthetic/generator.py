@@ -1,7 +1,7 @@
-"""`generate_scenario(seed, index, sizes)`: one deterministic synthetic Scenario.
+"""`generate_scenario(seed, index, sizes, knobs=...)`: one deterministic synthetic Scenario.
 
 Everything random is drawn from `np.random.default_rng([seed, index])`, so a (seed, index) pair
-always gives the same arrays, on any machine and in any process.
+(with the same knobs) always gives the same arrays, on any machine and in any process.
 """
 
 from __future__ import annotations
@@ -12,6 +12,8 @@ from scenariomax.enrich.budget import fit_to_budget
 from scenariomax.enrich.roadgraph import LaneLinks, lane_graph_arrays, polylines_to_roadgraph
 from scenariomax.scenario import Scenario
 from scenariomax.schema import OBJECT_TYPE_VEHICLE, Sizes
+from scenariomax.sources.synthetic import geometry as geo
+from scenariomax.sources.synthetic.knobs import DEFAULT_KNOBS, SyntheticKnobs
 from scenariomax.sources.synthetic.network import RoadNetwork
 from scenariomax.sources.synthetic.signals import signal_states
 from scenariomax.sources.synthetic.topologies import build_network
@@ -30,17 +32,20 @@ def scenario_id(seed: int, index: int) -> str:
     return f"synthetic-{seed}-{index:06d}"
 
 
-def generate_scenario(seed: int, index: int, sizes: Sizes | None = None, topology: str | None = None) -> Scenario:
-    """The synthetic scenario number `index` of the set drawn with `seed` (deterministic)."""
+def generate_scenario(seed: int, index: int, sizes: Sizes | None = None, topology: str | None = None,
+                      knobs: SyntheticKnobs | None = None) -> Scenario:
+    """The synthetic scenario number `index` of the set drawn with `seed` (deterministic), randomised as the
+    knobs say (default knobs: the generator's own mix)."""
     sizes = sizes or Sizes()
+    knobs = knobs or DEFAULT_KNOBS
     rng = np.random.default_rng([int(seed), int(index)])
     for _ in range(MAX_ATTEMPTS):
-        network = build_network(rng, topology)
-        traffic = simulate(network, rng, sizes.num_timesteps)
+        network = build_network(rng, topology, knobs)
+        traffic = simulate(network, rng, sizes.num_timesteps, knobs)
         sdc = _choose_sdc(network, traffic, rng, sizes)
         if sdc is not None:
             scenario = _assemble(scenario_id(seed, index), network, traffic, sdc, sizes)
-            return fit_to_budget(scenario, sizes)
+            return fit_to_budget(_tracking_noise(scenario, rng, knobs), sizes)
     raise GenerationError(f"{scenario_id(seed, index)}: no vehicle fit to be the SDC in {MAX_ATTEMPTS} attempts")
 
 
@@ -131,6 +136,21 @@ def _assemble(sid: str, network: RoadNetwork, traffic: Traffic, sdc: int, sizes:
         **lane_graph_arrays(links, sizes.num_lane_links),
         **light_fields,
     )
+
+
+def _tracking_noise(scenario: Scenario, rng: np.random.Generator, knobs: SyntheticKnobs) -> Scenario:
+    """Gaussian noise on the logged x, y and bbox_yaw of every valid object but the SDC (a real log's tracker
+    jitters the others; the SDC's own pose is precise). Draws nothing when the noise knobs are 0."""
+    noisy = scenario.valid & ~scenario.is_sdc[:, None]
+    changes = {}
+    if knobs.position_noise_m > 0:
+        noise = rng.normal(0.0, knobs.position_noise_m, size=(2, *noisy.shape))
+        changes["x"] = np.where(noisy, scenario.x + noise[0], scenario.x)
+        changes["y"] = np.where(noisy, scenario.y + noise[1], scenario.y)
+    if knobs.heading_noise_rad > 0:
+        noise = rng.normal(0.0, knobs.heading_noise_rad, size=noisy.shape)
+        changes["bbox_yaw"] = np.where(noisy, geo.wrap_angle(scenario.bbox_yaw + noise), scenario.bbox_yaw)
+    return scenario.replace(**changes) if changes else scenario
 
 
 def _labels(traffic: Traffic, order: np.ndarray, current: int, num_tracks: int = 4) -> tuple[np.ndarray, np.ndarray]:

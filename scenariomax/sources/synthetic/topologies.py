@@ -1,7 +1,8 @@
 """Road network builders, one per topology, drawn from an rng.
 
 Every builder returns a `RoadNetwork` in world coordinates (random rotation and shift).
-Lane width ~3.5 m, 1-3 lanes per direction, speed limits in m/s.
+Lane width ~3.5 m, 1-3 lanes per direction, speed limits in m/s; `SyntheticKnobs` widen or narrow the
+lanes, scale the speed limits and reweight the topologies.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from scenariomax.schema import (
     RG_SOLID_SINGLE_WHITE,
 )
 from scenariomax.sources.synthetic import geometry as geo
+from scenariomax.sources.synthetic.knobs import DEFAULT_KNOBS, TOPOLOGY_NAMES, SyntheticKnobs
 from scenariomax.sources.synthetic.network import NetworkBuilder, RoadNetwork
 from scenariomax.sources.synthetic.signals import random_plan
 
@@ -68,18 +70,26 @@ def _parking_strip(b: NetworkBuilder, ref: np.ndarray, sign: float, lanes_width:
         b.add_parking(xy, yaw)
 
 
-def _world(b: NetworkBuilder, rng: np.random.Generator) -> RoadNetwork:
+def _world(b: NetworkBuilder, rng: np.random.Generator, knobs: SyntheticKnobs) -> RoadNetwork:
+    if knobs.speed_limit_scale != 1.0:  # every lane's limit, wherever the builder chose it
+        for draft in b.lanes:
+            draft.speed_limit *= knobs.speed_limit_scale
     return b.build(angle=float(rng.uniform(-np.pi, np.pi)), shift=rng.uniform(-300.0, 300.0, size=2))
+
+
+def _lane_width(rng: np.random.Generator, knobs: SyntheticKnobs, low: float = 3.3, high: float = 3.8) -> float:
+    """A lane width drawn on the usual scale, mapped onto the knobs' range."""
+    return knobs.lane_width(float(rng.uniform(low, high)))
 
 
 def _urban_speed(rng) -> float:
     return float(rng.choice([8.9, 11.2, 13.4, 15.6]))  # 20-35 mph
 
 
-def build_straight(rng: np.random.Generator) -> RoadNetwork:
+def build_straight(rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> RoadNetwork:
     """A long two-way street with kerbside parking and (often) a mid-block zebra crossing."""
     b = NetworkBuilder("straight")
-    width, num = float(rng.uniform(3.3, 3.8)), int(rng.integers(1, 4))
+    width, num = _lane_width(rng, knobs), int(rng.integers(1, 4))
     length = float(rng.uniform(300.0, 380.0))
     ref = geo.segment(np.array([-length / 2, 0.0]), np.array([length / 2, 0.0]))
     walk = rng.random() < 0.7
@@ -92,13 +102,13 @@ def build_straight(rng: np.random.Generator) -> RoadNetwork:
         left = num * width + PARKING_WIDTH_M * parking[1]
         b.add_crosswalk(centre + np.array([0.0, (left - right) / 2]), np.array([0.0, 1.0]), left + right,
                         CROSSWALK_WIDTH_M, is_signalised=False)
-    return _world(b, rng)
+    return _world(b, rng, knobs)
 
 
-def build_curve(rng: np.random.Generator) -> RoadNetwork:
+def build_curve(rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> RoadNetwork:
     """Straight, circular bend (30-100 degrees, radius 35-150 m), straight."""
     b = NetworkBuilder("curve")
-    width, num = float(rng.uniform(3.3, 3.8)), int(rng.integers(1, 4))
+    width, num = _lane_width(rng, knobs), int(rng.integers(1, 4))
     radius = float(rng.uniform(35.0 + 4 * num * width, 150.0))
     sweep = float(np.radians(rng.uniform(30.0, 100.0))) * rng.choice([-1.0, 1.0])
     lead, tail = float(rng.uniform(110, 140)), float(rng.uniform(110, 140))
@@ -110,13 +120,14 @@ def build_curve(rng: np.random.Generator) -> RoadNetwork:
     ref = geo.join(first, bend, last)
     _road(b, ref, num, num, width, _urban_speed(rng), RG_LANE_SURFACE_STREET, rng,
           parking=(rng.random() < 0.3, rng.random() < 0.3))
-    return _world(b, rng)
+    return _world(b, rng, knobs)
 
 
-def _junction(rng: np.random.Generator, topology: str, arm_angles: list[float], control: str) -> RoadNetwork:
+def _junction(rng: np.random.Generator, topology: str, arm_angles: list[float], control: str,
+              knobs: SyntheticKnobs) -> RoadNetwork:
     """Arms radiate from the origin; incoming lanes end at stop points, connectors cross the box."""
     b = NetworkBuilder(topology)
-    width = float(rng.uniform(3.3, 3.8))
+    width = _lane_width(rng, knobs)
     lanes_main, lanes_cross = int(rng.integers(1, 4)), int(rng.integers(1, 4))
     speed = _urban_speed(rng)
     # Arms 0 and 2 form the main road; the others the cross road.
@@ -165,27 +176,28 @@ def _junction(rng: np.random.Generator, topology: str, arm_angles: list[float], 
                 draft.has_stop_sign = True
     if control == "signal":
         b.signal_plan = random_plan(rng, len(arms), has_crosswalks=bool(b.crosswalks))
-    return _world(b, rng)
+    return _world(b, rng, knobs)
 
 
-def build_intersection4(rng: np.random.Generator) -> RoadNetwork:
+def build_intersection4(rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> RoadNetwork:
     """Four-way junction, signalised (split phasing + pedestrian phase) or all-way stop."""
     base = 0.0
     control = "signal" if rng.random() < 0.8 else "stop"
-    return _junction(rng, "intersection4", [base, base + np.pi / 2, base + np.pi, base + 1.5 * np.pi], control)
+    return _junction(rng, "intersection4", [base, base + np.pi / 2, base + np.pi, base + 1.5 * np.pi], control,
+                     knobs)
 
 
-def build_intersection3(rng: np.random.Generator) -> RoadNetwork:
+def build_intersection3(rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> RoadNetwork:
     """T junction, usually all-way stop, sometimes signalised."""
     control = "stop" if rng.random() < 0.7 else "signal"
-    return _junction(rng, "intersection3", [0.0, 1.5 * np.pi, np.pi], control)
+    return _junction(rng, "intersection3", [0.0, 1.5 * np.pi, np.pi], control, knobs)
 
 
-def _merge(rng: np.random.Generator, topology: str) -> RoadNetwork:
+def _merge(rng: np.random.Generator, topology: str, knobs: SyntheticKnobs) -> RoadNetwork:
     """One-way carriageway; traffic from an on-ramp (or a dropped lane) yields and merges into
     the rightmost through lane along a merge zone."""
     b = NetworkBuilder(topology)
-    width = float(rng.uniform(3.4, 3.8))
+    width = _lane_width(rng, knobs, 3.4, 3.8)
     is_ramp = topology == "merge"
     num = int(rng.integers(1, 4)) if is_ramp else int(rng.integers(2, 4))
     speed = float(rng.uniform(22.0, 29.0)) if is_ramp else float(rng.uniform(13.0, 20.0))
@@ -236,24 +248,24 @@ def _merge(rng: np.random.Generator, topology: str) -> RoadNetwork:
     if not is_ramp:
         b.add_line(geo.segment(np.array([start, -num_through * width]), np.array([0.0, -num_through * width])),
                    RG_BROKEN_SINGLE_WHITE)
-    return _world(b, rng)
+    return _world(b, rng, knobs)
 
 
-def build_merge(rng: np.random.Generator) -> RoadNetwork:
-    return _merge(rng, "merge")
+def build_merge(rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> RoadNetwork:
+    return _merge(rng, "merge", knobs)
 
 
-def build_lane_drop(rng: np.random.Generator) -> RoadNetwork:
-    return _merge(rng, "lane_drop")
+def build_lane_drop(rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> RoadNetwork:
+    return _merge(rng, "lane_drop", knobs)
 
 
-def build_roundabout(rng: np.random.Generator) -> RoadNetwork:
+def build_roundabout(rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> RoadNetwork:
     """Single-lane roundabout with 3 or 4 arms; entering traffic gives way to circulating traffic.
 
     The ring is cut at every arm into a short *passing* stretch (from the exit point to the entry
     point, which circulating traffic reserves) and a *running* stretch up to the next arm."""
     b = NetworkBuilder("roundabout")
-    width = float(rng.uniform(3.5, 4.0))
+    width = _lane_width(rng, knobs, 3.5, 4.0)
     radius = float(rng.uniform(14.0, 22.0))
     num_arms = int(rng.choice([3, 4]))
     angles = np.arange(num_arms) * 2 * np.pi / num_arms + rng.uniform(-0.12, 0.12, num_arms)
@@ -285,10 +297,10 @@ def build_roundabout(rng: np.random.Generator) -> RoadNetwork:
         b.connect(incoming, running[k], yields=True)
         # Leaving is reserved too: a long vehicle's corners sweep across the entry beside it.
         b.connect(running[k - 1], outgoing)
-    return _world(b, rng)
+    return _world(b, rng, knobs)
 
 
-TOPOLOGY_BUILDERS: dict[str, Callable[[np.random.Generator], RoadNetwork]] = {
+TOPOLOGY_BUILDERS: dict[str, Callable[[np.random.Generator, SyntheticKnobs], RoadNetwork]] = {
     "straight": build_straight,
     "curve": build_curve,
     "intersection4": build_intersection4,
@@ -299,12 +311,18 @@ TOPOLOGY_BUILDERS: dict[str, Callable[[np.random.Generator], RoadNetwork]] = {
 }
 TOPOLOGIES: tuple[str, ...] = tuple(TOPOLOGY_BUILDERS)
 TOPOLOGY_WEIGHTS = np.array([0.12, 0.11, 0.25, 0.18, 0.12, 0.1, 0.12])
+if TOPOLOGIES != TOPOLOGY_NAMES:  # the knobs name the topologies without importing the builders
+    raise ImportError(f"knobs.TOPOLOGY_NAMES {TOPOLOGY_NAMES} differ from the builders {TOPOLOGIES}")
 
 
-def build_network(rng: np.random.Generator, topology: str | None = None) -> RoadNetwork:
-    """A random network of the given topology (drawn from the rng when None)."""
+def build_network(rng: np.random.Generator, topology: str | None = None,
+                  knobs: SyntheticKnobs | None = None) -> RoadNetwork:
+    """A random network of the given topology (drawn from the rng when None, with the knobs' weights)."""
+    knobs = knobs or DEFAULT_KNOBS
     if topology is None:
-        topology = TOPOLOGIES[int(rng.choice(len(TOPOLOGIES), p=TOPOLOGY_WEIGHTS))]
+        chosen = knobs.topology_probabilities()
+        weights = TOPOLOGY_WEIGHTS if chosen is None else np.array(chosen)
+        topology = TOPOLOGIES[int(rng.choice(len(TOPOLOGIES), p=weights))]
     if topology not in TOPOLOGY_BUILDERS:
         raise ValueError(f"unknown synthetic topology {topology!r} (choose from {', '.join(TOPOLOGIES)})")
-    return TOPOLOGY_BUILDERS[topology](rng)
+    return TOPOLOGY_BUILDERS[topology](rng, knobs)

@@ -19,6 +19,7 @@ import numpy as np
 from scenariomax.schema import TL_CAUTION, TL_GO, TL_STOP
 from scenariomax.sources.synthetic import agents as ag
 from scenariomax.sources.synthetic import geometry as geo
+from scenariomax.sources.synthetic.knobs import DEFAULT_KNOBS, SyntheticKnobs
 from scenariomax.sources.synthetic.network import RoadNetwork
 from scenariomax.sources.synthetic.routes import (
     MAX_ROUTE_POINTS,
@@ -382,57 +383,62 @@ class _World:
                     walker.state = "done"
 
 
-def simulate(network: RoadNetwork, rng: np.random.Generator, num_steps: int = 91) -> Traffic:
+def simulate(network: RoadNetwork, rng: np.random.Generator, num_steps: int = 91,
+             knobs: SyntheticKnobs | None = None) -> Traffic:
     """Runs warm-up + `num_steps` logged steps of traffic on the network."""
+    knobs = knobs or DEFAULT_KNOBS
     world = _World(network, rng, num_steps)
     urban = network.topology not in ("merge",)
-    parked = _park(network, rng)
-    _populate(world, rng, urban)
+    parked = _park(network, rng, knobs)
+    _populate(world, rng, urban, knobs)
     _add_walkers(world, rng)
     entries = [lane for lane in network.lanes if not lane.predecessors and not lane.is_gated]
-    inflow = float(rng.uniform(0.015, 0.05))
+    inflow = float(rng.uniform(0.015, 0.05)) * knobs.traffic_density
     for step in range(world.total_steps):
         world.step(step)
         for lane in entries:
             if rng.random() < inflow:
-                _spawn_at_entry(world, rng, lane, urban)
+                _spawn_at_entry(world, rng, lane, urban, knobs)
     return _collect(world, parked)
 
 
-def _park(network: RoadNetwork, rng: np.random.Generator) -> dict:
+def _park(network: RoadNetwork, rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> dict:
     spots = network.parking_spots
-    take = spots[rng.random(len(spots)) < rng.uniform(0.15, 0.5)][:14] if len(spots) else spots
+    take = spots[rng.random(len(spots)) < rng.uniform(*knobs.parked_fraction)][:14] if len(spots) else spots
     bodies = [ag.parked_body(rng) for _ in range(len(take))]
     return {"xy": take[:, :2].reshape(-1, 2), "yaw": take[:, 2].reshape(-1), "bodies": bodies}
 
 
-def _populate(world: _World, rng: np.random.Generator, urban: bool) -> None:
-    """Vehicles (and a few cyclists) spread along the ordinary lanes at the start of the warm-up."""
+def _populate(world: _World, rng: np.random.Generator, urban: bool, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> None:
+    """Vehicles (and a few cyclists) spread along the ordinary lanes at the start of the warm-up (the gaps
+    between them divided by the knobs' traffic density)."""
+    density = knobs.traffic_density
     spacing = (10.0, 45.0) if urban else (25.0, 80.0)
     for lane in world.net.lanes:
         if lane.is_gated or lane.length < 20.0:
             continue
-        s = float(rng.uniform(4.0, spacing[1]))
+        s = float(rng.uniform(4.0, spacing[1])) / density
         while True:
             is_bike = urban and not lane.right_neighbors and rng.random() < 0.08
             body = ag.cyclist_body(rng) if is_bike else ag.vehicle_body(rng)
             if s + body.length / 2 > lane.length - 4.0:
                 break
-            driver = ag.cyclist_driver(rng, lane.speed_limit) if is_bike else ag.vehicle_driver(rng)
+            driver = ag.cyclist_driver(rng, lane.speed_limit) if is_bike else ag.vehicle_driver(rng, knobs)
             s_centre = max(s, body.length / 2 + 1.0)
             speed = lane.speed_limit * driver.speed_factor * float(rng.uniform(0.5, 0.9))
             if not world.spawn(world.random_route(lane.lane_id), s_centre, speed, body, driver):
                 return
-            s = s_centre + body.length / 2 + float(rng.uniform(*spacing))
+            s = s_centre + body.length / 2 + float(rng.uniform(*spacing)) / density
 
 
-def _spawn_at_entry(world: _World, rng: np.random.Generator, lane, urban: bool) -> None:
+def _spawn_at_entry(world: _World, rng: np.random.Generator, lane, urban: bool,
+                    knobs: SyntheticKnobs = DEFAULT_KNOBS) -> None:
     slots, xy, _ = world.poses()
     if len(slots) and np.min(np.linalg.norm(xy - lane.xy[0], axis=1)) < 25.0:
         return
     is_bike = urban and not lane.right_neighbors and rng.random() < 0.08
     body = ag.cyclist_body(rng) if is_bike else ag.vehicle_body(rng)
-    driver = ag.cyclist_driver(rng, lane.speed_limit) if is_bike else ag.vehicle_driver(rng)
+    driver = ag.cyclist_driver(rng, lane.speed_limit) if is_bike else ag.vehicle_driver(rng, knobs)
     world.spawn(world.random_route(lane.lane_id), body.length / 2 + 0.5,
                 lane.speed_limit * driver.speed_factor * 0.8, body, driver)
 

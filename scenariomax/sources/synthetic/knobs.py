@@ -1,0 +1,167 @@
+"""`SyntheticKnobs`: randomisation knobs of the synthetic generator (traffic density, tracking noise, lane
+widths, speed limits, driver styles, parked cars, topology mix).
+
+The defaults reproduce the generator exactly (same arrays, same random stream), so a source or a cache made
+with default knobs is the one made before the knobs existed. Every knob widens or shifts a draw the
+generator makes anyway; only the tracking noise draws extra numbers, after everything else and only when on.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterable, Mapping
+
+# The topologies the generator builds, in the order of its default weights (topologies.TOPOLOGIES).
+TOPOLOGY_NAMES: tuple[str, ...] = ("straight", "curve", "intersection4", "intersection3", "merge", "lane_drop",
+                                   "roundabout")
+# The lane-width range every builder's draw is measured against (`rng.uniform(3.3, 3.8)`).
+BASE_LANE_WIDTH_M: tuple[float, float] = (3.3, 3.8)
+
+
+@dataclasses.dataclass(frozen=True)
+class SyntheticKnobs:
+    """How the synthetic scenes are randomised (the defaults are the generator as it always was)."""
+
+    traffic_density: float = 1.0  # x vehicles: initial gaps / density, entry inflow x density (capped by MAX_MOVERS)
+    position_noise_m: float = 0.0  # std of Gaussian tracking noise on logged x, y (all valid objects but the SDC)
+    heading_noise_rad: float = 0.0  # std of Gaussian tracking noise on logged bbox_yaw (same objects)
+    lane_width_m: tuple[float, float] = BASE_LANE_WIDTH_M  # range of lane widths (metres)
+    speed_limit_scale: float = 1.0  # x every lane's speed limit
+    driver_style_spread: float = 1.0  # x spread of driver traits around their centres (>1 more varied)
+    parked_fraction: tuple[float, float] = (0.15, 0.5)  # range of the share of parking spots taken
+    topology_weights: str = ""  # "intersection4:2,merge:1": relative weights (others 0); "" the default mix
+
+    def __post_init__(self) -> None:
+        # Normalise lists (JSON, config files) to tuples and integers to floats, so equal knobs compare and
+        # describe (as_dict, cache names) alike.
+        for field in dataclasses.fields(self):
+            value, default = getattr(self, field.name), field.default
+            if isinstance(default, tuple) and isinstance(value, (list, tuple, str)):
+                object.__setattr__(self, field.name, _coerce(field.name, value, default))
+            elif isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+                object.__setattr__(self, field.name, float(value))
+        _check_number("traffic_density", self.traffic_density, 0.0, 10.0, low_open=True)
+        _check_number("position_noise_m", self.position_noise_m, 0.0, 5.0)
+        _check_number("heading_noise_rad", self.heading_noise_rad, 0.0, 1.0)
+        _check_range("lane_width_m", self.lane_width_m, 2.7, 5.0)
+        _check_number("speed_limit_scale", self.speed_limit_scale, 0.5, 2.0)
+        _check_number("driver_style_spread", self.driver_style_spread, 0.0, 3.0)
+        _check_range("parked_fraction", self.parked_fraction, 0.0, 1.0)
+        if not isinstance(self.topology_weights, str):
+            raise ValueError(f"synthetic knob topology_weights: expected text like 'intersection4:2,merge:1', "
+                             f"got {self.topology_weights!r}")
+        self.topology_probabilities()  # validates
+
+    # --- construction and description ------------------------------------------------------------------
+    @classmethod
+    def from_dict(cls, values: Mapping) -> SyntheticKnobs:
+        """Knobs from {name: value} (tuples may be lists or "lo:hi" / "lo,hi" text; numbers may be text)."""
+        names = {f.name: f for f in dataclasses.fields(cls)}
+        kwargs = {}
+        for name, value in values.items():
+            if name not in names:
+                raise ValueError(f"unknown synthetic knob {name!r} (choose from {', '.join(names)})")
+            kwargs[name] = _coerce(name, value, names[name].default)
+        return cls(**kwargs)
+
+    @classmethod
+    def from_items(cls, items: Iterable[str], base: SyntheticKnobs | None = None) -> SyntheticKnobs:
+        """Knobs from "name=value" strings (tuples as "lo:hi"), applied over `base` (default knobs)."""
+        values = (base or cls()).as_dict()
+        for item in items:
+            name, sep, text = str(item).partition("=")
+            if not sep or not name.strip():
+                raise ValueError(f"synthetic knob {item!r} is not of the form NAME=VALUE")
+            values[name.strip()] = text.strip()
+        return cls.from_dict(values)
+
+    def as_dict(self) -> dict:
+        """JSON-ready {name: value} (tuples as lists)."""
+        return {name: list(value) if isinstance(value, tuple) else value
+                for name, value in dataclasses.asdict(self).items()}
+
+    def is_default(self) -> bool:
+        return self == SyntheticKnobs()
+
+    # --- what the generator asks ---------------------------------------------------------------------
+    def topology_probabilities(self) -> tuple[float, ...] | None:
+        """Probabilities over TOPOLOGY_NAMES, or None for the generator's default mix."""
+        text = self.topology_weights.strip()
+        if not text:
+            return None
+        weights = dict.fromkeys(TOPOLOGY_NAMES, 0.0)
+        for part in text.split(","):
+            if not part.strip():
+                continue
+            name, sep, weight = part.partition(":")
+            name = name.strip()
+            if name not in weights:
+                raise ValueError(f"synthetic knob topology_weights: unknown topology {name!r} "
+                                 f"(choose from {', '.join(TOPOLOGY_NAMES)})")
+            try:
+                value = float(weight) if sep else 1.0
+            except ValueError:
+                raise ValueError(f"synthetic knob topology_weights: bad weight {weight.strip()!r} for {name}") \
+                    from None
+            if not math.isfinite(value) or value < 0:
+                raise ValueError(f"synthetic knob topology_weights: weight of {name} must be >= 0, got {value}")
+            weights[name] = value
+        total = sum(weights.values())
+        if total <= 0:
+            raise ValueError("synthetic knob topology_weights: at least one weight must be > 0")
+        return tuple(w / total for w in weights.values())
+
+    def lane_width(self, draw: float) -> float:
+        """A builder's lane-width draw (made on the 3.3-3.8 m scale) mapped linearly onto `lane_width_m`.
+        Builders with their own range on that scale (merge 3.4-3.8, roundabout 3.5-4.0) keep their place
+        relative to it."""
+        if self.lane_width_m == BASE_LANE_WIDTH_M:
+            return draw
+        (lo, hi), (base_lo, base_hi) = self.lane_width_m, BASE_LANE_WIDTH_M
+        return lo + (draw - base_lo) * (hi - lo) / (base_hi - base_lo)
+
+    def spread(self, draw: float, centre: float, limits: tuple[float, float]) -> float:
+        """A driver trait drawn as usual, its distance from `centre` scaled by `driver_style_spread` and
+        clipped to `limits` (agents.VEHICLE_TRAITS)."""
+        if self.driver_style_spread == 1.0:
+            return draw
+        return float(min(max(centre + (draw - centre) * self.driver_style_spread, limits[0]), limits[1]))
+
+
+def _check_number(name: str, value, low: float, high: float, low_open: bool = False) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or value < low or value > high or (low_open and value == low):
+        bound = f"> {low:g}" if low_open else f">= {low:g}"
+        raise ValueError(f"synthetic knob {name}: expected a number {bound} and <= {high:g}, got {value!r}")
+
+
+def _check_range(name: str, value, low: float, high: float) -> None:
+    if not (isinstance(value, tuple) and len(value) == 2 and all(math.isfinite(v) for v in value)
+            and low <= value[0] <= value[1] <= high):
+        shown = ":".join(f"{v:g}" for v in value) if isinstance(value, tuple) else repr(value)
+        raise ValueError(f"synthetic knob {name}: expected lo:hi with {low:g} <= lo <= hi <= {high:g}, got {shown}")
+
+
+def _coerce(name: str, value, default):
+    """`value` as the type of the knob's default (text from a command line or an override is parsed)."""
+    try:
+        if isinstance(default, tuple):
+            if isinstance(value, str):
+                parts = value.replace(",", ":").split(":")
+                if len(parts) == 1:  # a single number: a fixed value
+                    parts = parts * 2
+                value = parts
+            return tuple(float(v) for v in value)
+        if isinstance(default, float):
+            if isinstance(value, bool):
+                raise ValueError
+            return float(value)
+        return str(value)
+    except (TypeError, ValueError):
+        kind = "lo:hi (two numbers)" if isinstance(default, tuple) else "a number" if isinstance(default, float) \
+            else "text"
+        raise ValueError(f"synthetic knob {name}: expected {kind}, got {value!r}") from None
+
+
+DEFAULT_KNOBS = SyntheticKnobs()

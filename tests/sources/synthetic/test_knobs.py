@@ -1,0 +1,277 @@
+"""`SyntheticKnobs`: each knob changes what it names, measured on generated scenarios; the default knobs leave
+the generator bit-identical (hashes recorded from the generator before the knobs existed)."""
+
+import dataclasses
+import hashlib
+import json
+import pickle
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import scenariomax
+from scenariomax.scenario import array_fields
+from scenariomax.schema import OBJECT_TYPE_VEHICLE, Sizes
+from scenariomax.sources.synthetic import (
+    TOPOLOGIES,
+    SyntheticKnobs,
+    SyntheticSource,
+    agents,
+    build_network,
+    generate_scenario,
+    overlapping_vehicle_pairs,
+    red_light_crossings,
+)
+from scenariomax.sources.synthetic.knobs import TOPOLOGY_NAMES
+
+SIZES = Sizes(num_objects=64)
+
+# sha256 (first 16 hex digits) of every array field (floats rounded to 1 mm / 1 mrad, so a last-bit difference
+# in a maths library cannot flip it), the id and the topology, computed with the generator *before* the knobs
+# were added: (seed, index, topology override) -> digest.
+DEFAULT_DIGESTS = {
+    (11, 0, None): "cad1d39e8c425e3c",
+    (11, 1, None): "ef2dbd2b4a37e53a",
+    (11, 2, None): "3946a45275c05e17",
+    (11, 3, None): "208abda0bbc2718a",
+    (5, 3, "straight"): "2d628c8cd6d3a54d",
+    (5, 3, "curve"): "bcc97cdc4ca392c5",
+    (5, 3, "intersection4"): "ba9ff7ca8093eeb2",
+    (5, 3, "intersection3"): "43e47eda08edc02e",
+    (5, 3, "merge"): "abcde72623b77e93",
+    (5, 3, "lane_drop"): "10eb1e6670ea338d",
+    (5, 3, "roundabout"): "54c2e0aad243de3c",
+}
+
+
+def digest(scenario) -> str:
+    h = hashlib.sha256(scenario.scenario_id.encode())
+    h.update(repr(sorted(scenario.metadata.items())).encode())
+    for name in array_fields():
+        value = getattr(scenario, name)
+        if value is None:
+            h.update(b"none")
+            continue
+        value = np.asarray(value)
+        if value.dtype.kind == "f":
+            value = np.round(value.astype(np.float64), 3)
+        h.update(name.encode())
+        h.update(str(value.shape).encode())
+        h.update(np.ascontiguousarray(value).tobytes())
+    return h.hexdigest()[:16]
+
+
+@pytest.mark.parametrize("knobs", [None, SyntheticKnobs(), SyntheticKnobs.from_items([])])
+def test_default_knobs_leave_the_generator_bit_identical(knobs):
+    for (seed, index, topology), expected in DEFAULT_DIGESTS.items():
+        scenario = generate_scenario(seed, index, SIZES, topology=topology, knobs=knobs)
+        assert digest(scenario) == expected, (seed, index, topology)
+
+
+def test_more_traffic_density_gives_more_vehicles():
+    def mean_vehicles(density):
+        counts = []
+        for index in range(6):
+            s = generate_scenario(21, index, SIZES, knobs=SyntheticKnobs(traffic_density=density))
+            counts.append(int(((s.object_type == OBJECT_TYPE_VEHICLE) & s.valid.any(axis=1)).sum()))
+        return np.mean(counts)
+
+    sparse, dense = mean_vehicles(0.5), mean_vehicles(2.0)
+    assert dense > 1.5 * sparse, (sparse, dense)
+
+
+def _second_difference(scenario, rows) -> float:
+    """Mean |x[t+1] - 2 x[t] + x[t-1]| over the rows' valid steps (jerky tracks have large ones)."""
+    x, valid = scenario.x[rows], scenario.valid[rows]
+    ok = valid[:, 2:] & valid[:, 1:-1] & valid[:, :-2]
+    return float(np.abs(x[:, 2:] - 2 * x[:, 1:-1] + x[:, :-2])[ok].mean())
+
+
+def test_tracking_noise_jitters_every_object_but_the_sdc():
+    clean = generate_scenario(21, 0, SIZES)
+    noisy = generate_scenario(21, 0, SIZES, knobs=SyntheticKnobs(position_noise_m=0.3, heading_noise_rad=0.05))
+    # The noise is drawn after everything else: same objects, same SDC, same validity.
+    assert np.array_equal(clean.object_id, noisy.object_id) and np.array_equal(clean.valid, noisy.valid)
+    sdc = clean.sdc_index
+    assert noisy.sdc_index == sdc
+    for name in ("x", "y", "bbox_yaw", "speed"):
+        assert np.array_equal(getattr(clean, name)[sdc], getattr(noisy, name)[sdc]), name
+    others = np.delete(np.arange(clean.num_objects), sdc)
+    valid = clean.valid[others]
+    moved = np.hypot(noisy.x[others] - clean.x[others], noisy.y[others] - clean.y[others])[valid]
+    assert 0.25 < float(np.mean(moved)) < 0.5  # Rayleigh mean of sigma 0.3: 0.376
+    turned = np.abs(np.angle(np.exp(1j * (noisy.bbox_yaw[others] - clean.bbox_yaw[others]))))[valid]
+    assert 0.02 < float(np.mean(turned)) < 0.06  # half-normal mean of 0.05: 0.04
+    assert np.all(np.abs(noisy.bbox_yaw) <= np.pi + 1e-6)
+    assert _second_difference(noisy, others) > 10 * _second_difference(clean, others)
+    assert np.array_equal(noisy.x[~noisy.valid], clean.x[~clean.valid])  # padding stays padding
+
+
+def _centre_line_spacings(network) -> list[float]:
+    """Distance from each lane's middle point to the centre line of its left neighbour."""
+    spacings = []
+    for lane in network.lanes:
+        middle = lane.xy[len(lane.xy) // 2]
+        for other in lane.left_neighbors:
+            xy = network.lane(other).xy
+            a, b = xy[:-1], xy[1:]
+            t = np.clip(np.einsum("ij,ij->i", middle - a, b - a) / np.einsum("ij,ij->i", b - a, b - a), 0, 1)
+            spacings.append(float(np.min(np.linalg.norm(a + t[:, None] * (b - a) - middle, axis=1))))
+    return spacings
+
+
+@pytest.mark.parametrize("topology", ["straight", "intersection4", "lane_drop"])
+def test_lane_width_knob_sets_the_spacing_of_adjacent_lanes(topology):
+    def spacings(width_range):
+        knobs = SyntheticKnobs.from_items([f"lane_width_m={width_range}"])
+        found = []
+        for i in range(6):
+            found += _centre_line_spacings(build_network(np.random.default_rng([4, i]), topology, knobs))
+        return np.array(found)
+
+    narrow, wide = spacings("2.9:3.0"), spacings("4.0:4.2")
+    assert len(narrow) and len(wide)
+    assert np.all((narrow > 2.85) & (narrow < 3.05)), narrow
+    assert np.all((wide > 3.95) & (wide < 4.25)), wide
+
+
+def test_speed_limit_scale_scales_every_lane_limit():
+    for topology in TOPOLOGIES:
+        base = build_network(np.random.default_rng([8, 1]), topology)
+        fast = build_network(np.random.default_rng([8, 1]), topology, SyntheticKnobs(speed_limit_scale=1.5))
+        assert np.allclose([lane.speed_limit for lane in fast.lanes],
+                           [1.5 * lane.speed_limit for lane in base.lanes]), topology
+    # ... and the scenario's roadgraph records them.
+    base = generate_scenario(8, 1, SIZES, topology="roundabout")
+    slow = generate_scenario(8, 1, SIZES, topology="roundabout", knobs=SyntheticKnobs(speed_limit_scale=0.5))
+
+    def limits(s):
+        return np.unique(s.roadgraph_speed_limit[s.roadgraph_valid & (s.roadgraph_speed_limit > 0)])
+
+    assert np.allclose(limits(slow), 0.5 * limits(base))
+
+
+def test_topology_weights_choose_the_topologies():
+    knobs = SyntheticKnobs(topology_weights="roundabout:1")
+    assert {generate_scenario(3, i, SIZES, knobs=knobs).metadata["topology"] for i in range(5)} == {"roundabout"}
+    mix = SyntheticKnobs(topology_weights="merge:1, curve:3")
+    drawn = {build_network(np.random.default_rng([0, i]), knobs=mix).topology for i in range(40)}
+    assert drawn == {"merge", "curve"}
+    assert TOPOLOGY_NAMES == TOPOLOGIES  # the knobs name the builders' topologies
+
+
+def test_parked_fraction_and_driver_spread_change_the_scene():
+    def parked(fraction):
+        return sum(int((s.valid.all(axis=1) & (s.speed.max(axis=1) <= 0)).sum())
+                   for s in (generate_scenario(2, i, SIZES, topology="straight",
+                                               knobs=SyntheticKnobs(parked_fraction=fraction)) for i in range(4)))
+
+    assert parked((0.0, 0.0)) < parked((0.9, 1.0))
+    base, spread = generate_scenario(6, 0, SIZES), generate_scenario(6, 0, SIZES,
+                                                                     knobs=SyntheticKnobs(driver_style_spread=2.5))
+    assert not np.array_equal(base.speed, spread.speed)
+
+
+def test_driver_style_spread_widens_the_traits_around_their_centres():
+    def traits(spread):
+        rng, knobs = np.random.default_rng(0), SyntheticKnobs(driver_style_spread=spread)
+        return np.array([dataclasses.astuple(agents.vehicle_driver(rng, knobs)) for _ in range(400)])
+
+    narrow, usual, wide = traits(0.5), traits(1.0), traits(2.0)
+    assert np.allclose(narrow.std(axis=0), 0.5 * usual.std(axis=0))  # same draws, half the distance
+    assert np.all(wide.std(axis=0) > 1.6 * usual.std(axis=0))  # (clipping trims the widest a little)
+    assert np.allclose(narrow.mean(axis=0), usual.mean(axis=0), atol=0.02)
+    floors = np.array([limits[0] for _, limits in agents.VEHICLE_TRAITS])
+    assert np.all(traits(3.0) >= floors) and np.all(traits(0.0) == traits(0.0)[0])
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"traffic_density": 0.0}, "traffic_density"), ({"position_noise_m": -0.1}, "position_noise_m"),
+    ({"heading_noise_rad": float("nan")}, "heading_noise_rad"), ({"lane_width_m": (4.0, 3.0)}, "lane_width_m"),
+    ({"lane_width_m": (1.0, 3.0)}, "lane_width_m"), ({"speed_limit_scale": 9.0}, "speed_limit_scale"),
+    ({"speed_limit_scale": 0.3}, "speed_limit_scale"),
+    ({"driver_style_spread": -1.0}, "driver_style_spread"), ({"parked_fraction": (0.2, 1.5)}, "parked_fraction"),
+    ({"topology_weights": "spaghetti:1"}, "topology_weights"), ({"topology_weights": "merge:0"}, "topology_weights"),
+    ({"topology_weights": "merge:x"}, "topology_weights"),
+])
+def test_bad_knobs_raise_one_line_naming_the_knob(kwargs, name):
+    with pytest.raises(ValueError, match=name) as caught:
+        SyntheticKnobs(**kwargs)
+    assert "\n" not in str(caught.value)
+
+
+def test_unknown_topology_lists_the_valid_names_and_unknown_knob_is_named():
+    with pytest.raises(ValueError, match="spaghetti.*roundabout"):
+        SyntheticKnobs(topology_weights="spaghetti:1")
+    with pytest.raises(ValueError, match="'bogus'.*traffic_density"):
+        SyntheticKnobs.from_items(["bogus=1"])
+    with pytest.raises(ValueError, match="lane_width_m"):
+        SyntheticKnobs.from_items(["lane_width_m=wide"])
+    with pytest.raises(ValueError, match="NAME=VALUE"):
+        SyntheticKnobs.from_items(["traffic_density"])
+
+
+def test_knobs_parse_describe_and_round_trip():
+    knobs = SyntheticKnobs.from_items(["traffic_density=2", "lane_width_m=2.8:4.2", "parked_fraction=0.1,0.2",
+                                       "topology_weights=intersection4:2,merge:1"])
+    assert knobs == SyntheticKnobs(traffic_density=2.0, lane_width_m=(2.8, 4.2), parked_fraction=(0.1, 0.2),
+                                   topology_weights="intersection4:2,merge:1")
+    assert SyntheticKnobs.from_dict(json.loads(json.dumps(knobs.as_dict()))) == knobs
+    assert pickle.loads(pickle.dumps(knobs)) == knobs
+    assert SyntheticKnobs(traffic_density=1).is_default() and not knobs.is_default()
+    assert scenariomax.SyntheticKnobs is SyntheticKnobs and "SyntheticKnobs" in scenariomax.__all__
+
+
+def test_source_passes_the_knobs_and_records_only_non_default_ones():
+    assert "knobs" not in SyntheticSource(num_scenarios=2).settings()
+    assert "knobs" not in SyntheticSource(num_scenarios=2, knobs=SyntheticKnobs()).settings()
+    knobs = SyntheticKnobs(topology_weights="merge:1")
+    source = SyntheticSource(num_scenarios=2, seed=1, sizes=Sizes(num_objects=16), knobs=knobs)
+    assert source.settings()["knobs"] == knobs.as_dict()
+    scenarios = list(source.read_unit("synthetic:00000-00001"))
+    assert [s.metadata["topology"] for s in scenarios] == ["merge", "merge"]
+
+
+def test_convert_command_takes_synthetic_knobs(tmp_path):
+    from vmax_cli.scenariomax_cli import main
+
+    out = tmp_path / "shards"
+    result = CliRunner().invoke(main, ["convert", "--num-scenarios", "2", "--num-objects", "16", "--roadgraph-points",
+                                       "3000", "--workers", "1", "--no-enrich", "--out", str(out),
+                                       "--synthetic-knob", "topology_weights=roundabout:1",
+                                       "--synthetic-knob", "lane_width_m=3.0:3.2"])
+    assert result.exit_code == 0, result.output
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["settings"]["source"]["knobs"]["topology_weights"] == "roundabout:1"
+    assert manifest["settings"]["source"]["knobs"]["lane_width_m"] == [3.0, 3.2]
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--synthetic-knob", "bogus=1"], "bogus"),
+    (["--synthetic-knob", "lane_width_m=5:3"], "lane_width_m"),
+    (["--synthetic-knob", "topology_weights=spaghetti:2"], "spaghetti"),
+    (["--dataset", "womd", "--src", "x", "--synthetic-knob", "traffic_density=2"], "--dataset synthetic"),
+])
+def test_convert_command_rejects_bad_knobs_in_one_line(tmp_path, args, words):
+    from vmax_cli.scenariomax_cli import main
+
+    result = CliRunner().invoke(main, ["convert", "--out", str(tmp_path / "out"), *args])
+    assert result.exit_code == 2
+    errors = [line for line in result.output.splitlines() if line.startswith("Error:")]
+    assert len(errors) == 1 and words in errors[0], result.output
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("knobs", [
+    SyntheticKnobs(lane_width_m=(2.7, 2.8), traffic_density=3.0),
+    SyntheticKnobs(speed_limit_scale=2.0, driver_style_spread=3.0),
+    SyntheticKnobs(speed_limit_scale=0.5, lane_width_m=(4.5, 5.0), parked_fraction=(1.0, 1.0)),
+])
+def test_extreme_knobs_keep_the_logs_safe(knobs):
+    """At the knobs' limits vehicles still never overlap nor run a red light, and the scenarios validate."""
+    for i, topology in enumerate(TOPOLOGIES):
+        s = generate_scenario(13, i, SIZES, topology=topology, knobs=knobs)
+        assert s.validate() == [] and overlapping_vehicle_pairs(s) == [], topology
+        vehicles = np.flatnonzero(s.object_type == OBJECT_TYPE_VEHICLE)
+        assert not any(red_light_crossings(s, obj) for obj in vehicles), topology
