@@ -47,8 +47,12 @@ class _NeedsSimExtra(click.Group):
 
 
 @click.group(cls=_NeedsSimExtra)
+@click.version_option(package_name="vmax", prog_name="vmax-sim")  # the installed metadata: no jax import
 def main() -> None:
-    """V-Max simulator: train and evaluate policies, benchmark, run the demo."""
+    """V-Max simulator: train and evaluate policies, benchmark, run the demo.
+
+    Caches (synthetic training splits, map indices) live under $VMAX_CACHE_DIR, default ~/.cache/vmax_sim:
+    see `vmax-sim cache info`."""
 
 
 @main.command()
@@ -92,7 +96,8 @@ def _env_kinds(choice: str) -> tuple[str, ...]:
               help="Run directory (default: runs/<preset>-<time>).")
 @click.option("--resume", "resume_dir", default=None, type=click.Path(file_okay=False),
               help="Continue this run directory from its last checkpoint (overrides: only train.total_env_steps, "
-                   "train.eval_every, train.checkpoint_every, train.keep_checkpoints, e.g. to extend a run).")
+                   "train.eval_every, train.checkpoint_every, train.keep_checkpoints, train.max_wall_minutes, "
+                   "e.g. to extend a run). Ctrl-C or SIGTERM during a run saves a checkpoint first.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.argument("overrides", nargs=-1)
 def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
@@ -117,6 +122,8 @@ def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
             result = run_training(config, run_dir, progress=not quiet, print_fn=click.echo)
     except (InputError, ValueError, OSError) as error:
         _fail(one_line(error))
+    if result.interrupted:  # the checkpoint and the resume command were printed
+        raise SystemExit(130)
     click.echo(f"trained {result.env_steps:,} env steps in {result.wall_s / 60:.1f} min "
                f"({result.env_steps_per_s:,.0f} env steps/s); run directory {result.run_dir}")
     if result.final_evaluation:
@@ -178,6 +185,7 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
         write_evaluation_settings,
         write_report,
     )
+    from vmax_sim.training.run_policy import evaluate_run
     from vmax_sim.visualization.view import run_data
 
     try:
@@ -190,7 +198,8 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
         extras = EvaluationExtras.create(gallery_dir, gallery_max, gallery_passed, difficulty, view_file, view_max)
         runs = compare_policies(entries, data, mode, num_scenarios=num_scenarios, batch_size=batch_size,
                                 num_objects=num_objects, seed=seed, progress=not quiet,  # on stderr: --json stays clean
-                                print_fn=lambda line: click.echo(line, err=True), on_batch=extras.on_batch)
+                                print_fn=lambda line: click.echo(line, err=True), on_batch=extras.on_batch,
+                                run_evaluator=evaluate_run)
         summaries = {run.name: run.result.summary for run in runs}
         if len(runs) == 1:
             text = json.dumps(runs[0].result.summary, indent=2)
@@ -271,6 +280,34 @@ def view(target, policy, num_scenarios, data, num_objects, seed, out, quiet):
         _fail(one_line(error))
     click.echo(f"{result.num_embedded} scenario(s); {result.size_bytes / 1e6:.1f} MB", err=True)
     click.echo(str(result.out))
+
+
+@main.group()
+def cache() -> None:
+    """What V-Max keeps under $VMAX_CACHE_DIR (default ~/.cache/vmax_sim): the embedded synthetic splits and the
+    map-index cache. Both are rebuilt when needed."""
+
+
+@cache.command("info")
+def cache_info():
+    """Each cached synthetic split and map-index version with its size."""
+    from vmax_sim.data.cache_admin import format_cache_info
+
+    click.echo(format_cache_info())
+
+
+@cache.command("clear")
+@click.argument("kind", type=click.Choice(["all", "synthetic", "map_index"]), default="all")
+def cache_clear(kind):
+    """Delete the cached synthetic splits, map indices, or both (the default)."""
+    from vmax_sim.data.cache_admin import clear_cache, human_bytes
+    from vmax_sim.data.config import cache_dir
+
+    try:
+        freed = clear_cache(kind)
+    except OSError as error:
+        _fail(one_line(error))
+    click.echo(f"freed {human_bytes(freed)} under {cache_dir()}")
 
 
 if __name__ == "__main__":

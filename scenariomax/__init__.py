@@ -36,6 +36,7 @@ PUBLIC_MODULES = (
     "scenariomax",
     "scenariomax.crop",
     "scenariomax.errors",
+    "scenariomax.locks",
     "scenariomax.progress",
     "scenariomax.schema",
     "scenariomax.io",
@@ -51,6 +52,7 @@ _LAZY = {
     "convert": "scenariomax.pipeline",
     "make_transform": "scenariomax.enrich.transform",
     "SyntheticSource": "scenariomax.sources.synthetic",
+    "SyntheticKnobs": "scenariomax.sources.synthetic",
     "draw_scenario": "scenariomax.render",
     "render_scenario": "scenariomax.render",
     "format_report": "scenariomax.inspect",
@@ -78,7 +80,7 @@ __all__ = [
     # the schema (module and sizes)
     "schema", "Sizes", "ShardSchema", "load_schema", "default_sizes",
     # conversion, enrichment and the synthetic source
-    "convert", "ConvertSettings", "make_transform", "SyntheticSource",
+    "convert", "ConvertSettings", "make_transform", "SyntheticSource", "SyntheticKnobs",
     # pictures and inspection
     "render_scenario", "draw_scenario", "inspect_shards", "format_report", "load_scenario",
     # errors a user can cause

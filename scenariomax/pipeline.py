@@ -35,6 +35,7 @@ from scenariomax.codec import encode_scenario
 from scenariomax.enrich.budget import fit_to_budget
 from scenariomax.errors import InputError, describe_os_error
 from scenariomax.io.tfrecord import TFRecordWriter, frame_record, iter_records
+from scenariomax.locks import LOCK_FILE, FolderBusyError, FolderLock
 from scenariomax.manifest import (
     MANIFEST,
     MANIFEST_TEMP,
@@ -446,7 +447,7 @@ def owned_files(manifest: dict) -> set[str]:
 
 def _foreign_entries(out: Path, owned: set[str]) -> list[str]:
     """Entries of `out` (and of its work folder) that no manifest lists: the user's, never ours to touch."""
-    foreign = [entry.name for entry in sorted(out.iterdir()) if entry.name not in owned]
+    foreign = [entry.name for entry in sorted(out.iterdir()) if entry.name not in owned and entry.name != LOCK_FILE]
     work = out / WORK_DIR
     if work.is_dir():
         foreign += [f"{WORK_DIR}/{entry.name}" for entry in sorted(work.iterdir())
@@ -627,7 +628,19 @@ def _check_settings(settings: ConvertSettings) -> None:
 def _convert_into(out: Path, source: Source, settings: ConvertSettings, units: list[str],
                   start: float) -> ConversionResult:
     _refuse_inputs_inside(out, units)
+    if out.exists() and not out.is_dir():
+        raise ConversionError(f"{out}: exists and is not a folder; choose another --out")
+    try:
+        with FolderLock(out, "conversion", note=False) as lock:  # one writer per output folder
+            return _convert_locked(out, source, settings, units, start, lock)
+    except FolderBusyError as error:
+        raise ConversionError(str(error)) from None
+
+
+def _convert_locked(out: Path, source: Source, settings: ConvertSettings, units: list[str],
+                    start: float, lock: FolderLock) -> ConversionResult:
     previous = _claim_output(out, settings)
+    lock.note_holder()  # the folder is ours: say who writes it
     if previous is not None:
         _check_resumable(previous, source, settings, units, out)
     out.mkdir(parents=True, exist_ok=True)
@@ -647,7 +660,7 @@ def _convert_into(out: Path, source: Source, settings: ConvertSettings, units: l
     with progress:
         for result in results:
             written = sink.add_unit_result(result)
-            progress.update(written if by_scenario else 1)
+            progress.update(scenarios_settled(result, written) if by_scenario else 1)
             counts = {} if by_scenario else {"scenarios": sink.num_saved_records()}
             progress.set_postfix(**counts, failures=len(sink.manifest["failures"]) + sum(
                 map(len, sink.pending_failures.values())))
@@ -662,9 +675,15 @@ def _convert_into(out: Path, source: Source, settings: ConvertSettings, units: l
     )
 
 
+def scenarios_settled(result: UnitResult, written: int) -> int:
+    """Scenarios a unit's result settles, for a progress display counting scenarios of an expected total: those
+    written and those that failed one by one (a whole-unit failure, scenario "*", stands for none of the total)."""
+    return written + sum(failure.scenario != "*" for failure in result.failures)
+
+
 def _progress(enabled: bool, source: Source, sink: _ShardSink, num_units: int, num_units_done: int) -> Progress:
-    """Scenarios of the known total (synthetic), else inputs of all inputs: either way with an ETA. A resumed
-    run starts at what was saved before."""
+    """Scenarios of the known total (synthetic, the records of build-sdc-paths' inputs), else inputs of all
+    inputs: either way with an ETA. A resumed run starts at what was saved before."""
     expected = getattr(source, "expected_num_scenarios", lambda: None)()
     if expected is not None:
         return Progress("converting", total=expected, unit="scenarios", enabled=enabled,

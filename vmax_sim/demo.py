@@ -10,6 +10,7 @@ disjoint synthetic splits (seed and seed + 1).
 from __future__ import annotations
 
 import json
+import math
 import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -20,6 +21,8 @@ DEMO_BASELINES = ("expert", "constant")
 # Behaviour cloning with the per-group MLP encoder learns to drive in minutes on two CPU cores;
 # `vmax-sim train` runs the other algorithms and encoders.
 DEMO_PRESET = "bc-mlp-navigation"
+EVALUATIONS = 6  # held-out evaluations along the learning curve (the last one at the end)
+TRAINED_NAME = "trained BC"  # the trained policy's column and legend entry
 
 
 def _convert(shards: Path, num_scenarios: int, seed: int, workers: int | None, num_objects: int):
@@ -37,22 +40,29 @@ def _fresh(folder: Path) -> None:
         shutil.rmtree(folder)
 
 
-def comparison_table(summaries: dict[str, dict]) -> str:
-    """Markdown table: one column per policy, the four scores and the failure rates as rows."""
-    from vmax_sim.evaluation.report import summary_value
+def comparison_markdown(runs, title: str, context: str) -> str:
+    """`vmax-sim evaluate`'s comparison table (same rows, names and % values) under a title and a line saying
+    what was trained on what and evaluated where."""
+    from vmax_sim.evaluation.report import format_markdown
 
-    rows = [("accuracy", "accuracy"), ("V-Max score", "vmax_score"), ("nuPlan score", "nuplan_score"),
-            ("collision", "overlap"), ("off-road", "offroad"), ("red light", "red_light"),
-            ("progress", "ego_progress"), ("comfort", "comfort")]
-    names = list(summaries)
-    lines = ["| metric | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
-    for label, key in rows:
-        values = []
-        for name in names:
-            value = summary_value(summaries[name], key)
-            values.append("n/a" if value is None else f"{value:.3f}")
-        lines.append(f"| {label} | " + " | ".join(values) + " |")
-    return "\n".join(lines)
+    return f"# {title}\n\n{context}\n\n{format_markdown(runs)}\n"
+
+
+def redraw_learning_curve(run_dir: Path, title: str, baselines: dict[str, dict]) -> Path:
+    """The run's learning curve again, with the baselines' held-out scores as reference lines (training drew it
+    before they were evaluated)."""
+    from vmax_sim.training.logger import RunLogger
+    from vmax_sim.training.plots import plot_learning_curve
+
+    references = {}
+    for name, summary in baselines.items():
+        metrics = summary.get("metrics", {})
+        rates = {k: metrics[k] for k in ("overlap", "offroad", "red_light") if metrics.get(k) is not None}
+        references[name] = {"accuracy": summary["accuracy"], "vmax_score": summary["vmax_score"], **rates}
+    evaluations = RunLogger(run_dir, tensorboard=False, file_name="eval.csv").rows
+    training = RunLogger(run_dir, tensorboard=False, file_name="metrics.csv").rows
+    return plot_learning_curve(run_dir / "learning_curve.png", evaluations, training, title=title,
+                               baselines=references)
 
 
 def run_demo(out: str | Path = "runs/demo", num_scenarios: int = 160, num_eval_scenarios: int = 32, seed: int = 0,
@@ -72,11 +82,12 @@ def run_demo(out: str | Path = "runs/demo", num_scenarios: int = 160, num_eval_s
     from scenariomax import format_report, inspect_shards, load_scenario, read_shards, render_scenario
     from vmax_sim.data import DataConfig, scenarios_to_batch
     from vmax_sim.evaluation import evaluate, format_summary
+    from vmax_sim.evaluation.report import PolicyRun, compare_policies
     from vmax_sim.evaluation.rollout import make_rollout_fn
-    from vmax_sim.evaluation.trained import load_trained_policy
     from vmax_sim.metrics import MetricsConfig
     from vmax_sim.training import apply_overrides, preset_config, train
     from vmax_sim.training.run import components
+    from vmax_sim.training.run_policy import load_trained_policy
     from vmax_sim.visualization import render_rollouts, rollout_paths
 
     if num_scenarios < 1 or num_eval_scenarios < 1:
@@ -104,7 +115,7 @@ def run_demo(out: str | Path = "runs/demo", num_scenarios: int = 160, num_eval_s
     print_fn(f"[3/5] training {DEMO_PRESET} for {train_steps:,} env steps (run directory {run_dir})")
     config = apply_overrides(preset_config(DEMO_PRESET), [
         f"data.train={shards}", f"data.eval={eval_shards}", f"data.num_objects={num_objects}",
-        f"train.total_env_steps={train_steps}", f"train.eval_every={max(train_steps // 3, 1)}",
+        f"train.total_env_steps={train_steps}", f"train.eval_every={max(train_steps // EVALUATIONS, 1)}",
         f"train.eval_scenarios={num_eval_scenarios}", f"train.eval_batch_size={min(16, num_eval_scenarios)}",
         f"train.pool_size={min(32, num_scenarios)}", f"train.pool_refresh={min(4, num_scenarios)}",
         f"train.checkpoint_every={max(train_steps // 2, 1)}", f"train.seed={seed}", *overrides])
@@ -113,18 +124,28 @@ def run_demo(out: str | Path = "runs/demo", num_scenarios: int = 160, num_eval_s
              f"({result.env_steps_per_s:,.0f} env steps/s); learning curve: {run_dir / 'learning_curve.png'}")
 
     print_fn("[4/5] closed-loop evaluation on the held-out split (non-reactive: others replay the log)")
+    runs = compare_policies(list(DEMO_BASELINES), str(eval_shards), batch_size=min(16, num_eval_scenarios),
+                            num_objects=num_objects, progress=False, print_fn=print_fn)
     data = DataConfig(path=str(eval_shards), batch_size=min(16, num_eval_scenarios), num_objects=num_objects)
-    evaluations = {policy: evaluate(policy, data).summary for policy in DEMO_BASELINES}
     loaded = load_trained_policy(run_dir)
     env_config = components(loaded.config)[0].env_config
     trained = evaluate(loaded.policy, data, env_config=env_config, obs_config=loaded.config.obs,
                        policy_params=loaded.params)
-    evaluations["trained " + DEMO_PRESET] = trained.summary
+    runs.append(PolicyRun(TRAINED_NAME, trained, math.nan, 0))
+    evaluations = {run.name: run.result.summary for run in runs}
     for summary in evaluations.values():
         print_fn(format_summary(summary))
-    table = comparison_table(evaluations)
-    (out / "comparison.md").write_text(table + "\n")
+    context = (f"{DEMO_PRESET} (behaviour cloning with DART noise {config.algo_config.behaviour_noise:g}, MLP "
+               f"encoder) trained for {result.env_steps:,} env steps on {num_scenarios} synthetic scenarios "
+               f"(seed {seed}); evaluated closed-loop on {num_eval_scenarios} held-out synthetic scenarios "
+               f"(seed {seed + 1}), non-reactive (the other agents replay the log), with the expert (log replay) "
+               f"and constant velocity beside it.")
+    table = comparison_markdown(runs, "V-Max demo: held-out evaluation", context)
+    (out / "comparison.md").write_text(table)
     print_fn(table)
+    curve_title = (f"BC (MLP encoder), {num_scenarios} synthetic training scenarios -> {num_eval_scenarios} "
+                   f"held-out")
+    redraw_learning_curve(run_dir, curve_title, {"constant velocity": evaluations["constant"]})
 
     print_fn("[5/5] drawing the trained policy's rollout beside the expert's")
     first = next(iter(read_shards(eval_shards)))
@@ -138,8 +159,10 @@ def run_demo(out: str | Path = "runs/demo", num_scenarios: int = 160, num_eval_s
     trained_fn = make_rollout_fn(_environment(env_config, MetricsConfig()), loaded.policy, MetricsConfig(),
                                  loaded.config.obs)
     paths = {"expert (log replay)": rollout_paths(expert_fn(batch, keys, None)),
-             "trained " + DEMO_PRESET: rollout_paths(trained_fn(batch, keys, loaded.params))}
-    rollout_png = render_rollouts(first, paths, out / "rollout.png", title=f"{first.scenario_id}: closed loop")
+             TRAINED_NAME: rollout_paths(trained_fn(batch, keys, loaded.params))}
+    rollout_png = render_rollouts(first, paths, out / "rollout.png",
+                                  title=f"{first.scenario_id} (held-out): expert vs {TRAINED_NAME}, closed loop, "
+                                        f"non-reactive")
     print_fn(f"      {rollout_png}")
 
     summary = {

@@ -50,12 +50,14 @@ def test_run_demo_trains_evaluates_and_draws(tmp_path):
     written = json.loads((out / "summary.json").read_text())
     assert written == json.loads(json.dumps(summary))
     assert set(written) >= {"shards", "scenario_png", "conversion", "inspect", "evaluation", "training"}
-    assert set(written["evaluation"]) == {"expert", "constant", "trained bc-mlp-navigation"}
+    assert set(written["evaluation"]) == {"expert", "constant", "trained BC"}
     for policy_summary in written["evaluation"].values():
         assert {"accuracy", "accuracy_at_fault", "nuplan_score", "vmax_score", "metrics"} <= set(policy_summary)
         assert policy_summary["num_episodes"] == 4
     assert written["evaluation"]["expert"]["accuracy"] == 1.0
     assert written["training"]["env_steps"] == 80
     table = (out / "comparison.md").read_text()
-    assert table.startswith("| metric | expert | constant | trained bc-mlp-navigation |")
+    # evaluate's table under a title and a line saying what was trained on what
+    assert table.startswith("# V-Max demo: held-out evaluation") and "4 held-out synthetic scenarios" in table
+    assert "| Metric (%) | expert | constant | trained BC |" in table and "| Accuracy | 100.00 |" in table
     assert any(line.startswith("[3/5] training") for line in lines)

@@ -2,9 +2,10 @@
 
 `compare_policies` streams the scenarios once: each host batch is converted once and every named
 policy runs on it (one compilation per policy), so N policies cost one pass of data loading.
-Training run directories are evaluated by `vmax_sim.evaluation.trained.evaluate_run` with the
-run's own observation and environment settings. `format_markdown` / `table_csv` lay the results
-out as the V-Max paper's benchmark table (rows = metrics, columns = policies, values in %).
+Training run directories are evaluated by the `run_evaluator` the caller passes
+(`vmax_sim.training.evaluate_run`, with the run's own observation and environment settings): evaluation does
+not import training, which sits above it. `format_markdown` / `table_csv` lay the results out as the V-Max
+paper's benchmark table (rows = metrics, columns = policies, values in %).
 """
 
 from __future__ import annotations
@@ -60,6 +61,11 @@ MODE_ROWS: tuple[tuple[str, str], ...] = (
 )
 
 
+# which way each row is better, printed under the table
+DIRECTION_NOTE = ("Higher is better, except Collision, Off-road, Red light, At-fault collision and Other collisions "
+                  "(lower is better) and Progress ratio (100 = the log's distance).")
+
+
 @dataclasses.dataclass(frozen=True)
 class PolicyRun:
     """One column of the comparison: a policy's evaluation and how long its warm batches took."""
@@ -113,21 +119,31 @@ def check_entries(entries: Sequence[str]) -> None:
                              "nor a training run directory")
 
 
+def check_run_evaluator(entries: Sequence[str], run_evaluator: Callable | None) -> None:
+    """ValueError (one line) when a training run directory is to be compared but nothing can evaluate it: the
+    evaluator comes from training (above evaluation), so the caller passes it."""
+    runs = [entry for entry in entries if is_run_directory(entry)]
+    if runs and run_evaluator is None:
+        raise ValueError(f"{runs[0]}: a training run directory; compare_policies needs "
+                         "run_evaluator=vmax_sim.training.evaluate_run to evaluate it")
+
+
 def compare_policies(entries: Sequence[str], data: str | None, mode: str = "non_reactive", *,
                      num_scenarios: int | None = None, batch_size: int = 8, num_objects: int = 64, seed: int = 0,
                      progress: bool = True, print_fn: Callable[[str], None] = print,
-                     on_batch: Callable | None = None) -> list[PolicyRun]:
+                     on_batch: Callable | None = None, run_evaluator: Callable | None = None) -> list[PolicyRun]:
     """Evaluates every entry (a POLICY_NAMES name or a training run directory) on the same scenarios.
 
     Named policies share one pass over `data` (each batch converted once, then run by every policy);
-    run directories go through `evaluate_run` (default data: the run's held-out split). When `progress`,
-    stderr shows the scenarios done of the total (scenariomax.progress: a bar on a terminal, plain lines
-    otherwise). Returns the columns in the order given. on_batch(column, ids,
+    run directories go through `run_evaluator` (pass `vmax_sim.training.evaluate_run`; default data: the
+    run's held-out split). When `progress`, stderr shows the scenarios done of the total (scenariomax.progress:
+    a bar on a terminal, plain lines otherwise). Returns the columns in the order given. on_batch(column, ids,
     host batch, host Rollout with trajectories, number of real episodes) is called after every batch of
     every entry (column: its index in `entries`), see `evaluate`.
     """
     mode = _check_mode(mode, seed)  # an EvalMode: a name gets `seed` as its perturbation seed
     check_entries(entries)
+    check_run_evaluator(entries, run_evaluator)
     named = [entry for entry in entries if not is_run_directory(entry)]
     runs: dict[int, PolicyRun] = {}
     if named:
@@ -142,13 +158,11 @@ def compare_policies(entries: Sequence[str], data: str | None, mode: str = "non_
     for index, entry in enumerate(entries):
         if index in runs:
             continue
-        from vmax_sim.evaluation.trained import evaluate_run
-
         print_fn(f"evaluating the run {entry} ...")
         start = time.perf_counter()
         hook = None if on_batch is None else functools.partial(on_batch, index)
-        result = evaluate_run(entry, data, mode=mode, num_scenarios=num_scenarios, batch_size=batch_size,
-                              on_batch=hook, progress=progress)
+        result = run_evaluator(entry, data, mode=mode, num_scenarios=num_scenarios, batch_size=batch_size,
+                               on_batch=hook, progress=progress)
         runs[index] = PolicyRun(result.summary["policy"], result, time.perf_counter() - start,
                                 result.summary["num_episodes"])  # includes compilation
     ordered = [runs[i] for i in range(len(entries))]
@@ -236,7 +250,8 @@ def format_markdown(runs: Sequence[PolicyRun]) -> str:
         lines.append("| " + " | ".join([label] + [_cell(v) for v in values]) + " |")
     episodes = ", ".join(f"{run.name}: {run.result.summary['num_episodes']}" for run in runs)
     speed = ", ".join(f"{run.name}: {_speed(run)}" for run in runs)
-    lines += ["", f"episodes: {episodes}", f"episodes/s (after the first batch, which compiles): {speed}"]
+    lines += ["", DIRECTION_NOTE, "", f"episodes: {episodes}",
+              f"episodes/s (after the first batch, which compiles): {speed}"]
     unjudged = max(run.result.summary.get("num_unjudged", 0) for run in runs)
     if unjudged:
         lines.append(f"left out of the means: {unjudged} episode(s) with no judged step (the SDC's log ends at "

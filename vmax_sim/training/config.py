@@ -16,6 +16,7 @@ import typing
 from collections.abc import Sequence
 from typing import Any
 
+from scenariomax import SyntheticKnobs
 from vmax_sim.agents import ALGORITHMS, get_config
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.networks import ENCODER_NAMES, EncoderConfig
@@ -32,6 +33,9 @@ class TrainDataConfig:
     synthetic_train_scenarios: int = 2000
     synthetic_eval_scenarios: int = 100  # size of the embedded evaluation split (seed synthetic_seed + 1)
     synthetic_seed: int = 0
+    # randomisation of the embedded *training* split (data.synthetic.traffic_density=2,
+    # data.synthetic.lane_width_m=2.8,4.2, ...); the evaluation split stays the default generator
+    synthetic: SyntheticKnobs = SyntheticKnobs()
     num_objects: int = 64
     num_roadgraph_points: int = 30000
     num_paths: int = 10
@@ -62,8 +66,13 @@ class LoopConfig:
     # algorithm with its "default" settings (sac, ppo: 4, with gamma 0.96 per action), else 1
     action_repeat: int | None = None
     seed: int = 0
+    # wall-clock budget of the training loop (minutes; setup and compilation excluded, evaluations during training
+    # included): the run stops at the first chunk past it with a final checkpoint and a final evaluation
+    max_wall_minutes: float | None = None
 
     def __post_init__(self) -> None:
+        if self.max_wall_minutes is not None and not self.max_wall_minutes > 0:
+            raise ValueError(f"train.max_wall_minutes must be positive, got {self.max_wall_minutes}")
         for name in ("total_env_steps", "chunk_steps", "pool_size", "eval_scenarios", "eval_batch_size",
                      "checkpoint_every", "keep_checkpoints", "action_repeat"):
             if getattr(self, name) is not None and getattr(self, name) < 1:

@@ -48,7 +48,7 @@ class RunLogger:
         row.update({k: float(v) for k, v in scalars.items()})
         self.rows.append(row)
         new = [k for k in row if k not in self.columns]
-        if new:
+        if new or not self.path.exists():  # a new column, or the first row (after a truncation to nothing too)
             self.columns += new
             self._rewrite()
         else:

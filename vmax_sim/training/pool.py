@@ -25,6 +25,7 @@ from scenariomax.errors import InputError
 from vmax_sim.data import DataConfig
 from vmax_sim.data.convert import stack_states
 from vmax_sim.data.loader import indexed_to_numpy_state, iter_indexed_scenarios
+from vmax_sim.data.mixture import is_mixture, iter_mixed_indexed_scenarios, parse_sources
 from vmax_sim.datatypes import SimulatorState
 
 _END = object()
@@ -36,6 +37,14 @@ def slim_state(state: SimulatorState) -> SimulatorState:
     return state.replace(roadgraph_points=jax.tree.map(lambda a: a[:1], state.roadgraph_points))
 
 
+def stream_items(config: DataConfig) -> Iterator:
+    """The (scenario, map index source) pairs of a training stream: `config.path` is one source, or a weighted
+    mixture spec (vmax_sim.data.mixture) drawn with `config.shuffle_seed`."""
+    if is_mixture(config.path):
+        return iter_mixed_indexed_scenarios(config, parse_sources(config.path), config.shuffle_seed or 0)
+    return iter_indexed_scenarios(config)
+
+
 class ScenarioStream:
     """Converted numpy states of `config`'s scenarios in stream order, from index `start` on."""
 
@@ -44,7 +53,7 @@ class ScenarioStream:
         self.waited_s = 0.0  # total time `take` blocked
         self._queue: queue.Queue = queue.Queue(maxsize=max(capacity, 1))
         self._stop = threading.Event()
-        scenarios = itertools.islice(iter_indexed_scenarios(config), start, None)  # map indices from the cache
+        scenarios = itertools.islice(stream_items(config), start, None)  # map indices from the cache
         self._thread = threading.Thread(target=self._fill, args=(scenarios, config), daemon=True)
         self._thread.start()
 
@@ -94,7 +103,8 @@ class ScenarioStream:
 def pool_shapes(config: DataConfig, pool_size: int) -> SimulatorState:
     """Shapes and dtypes (jax.ShapeDtypeStruct leaves) of a pool of `config`'s scenarios, from the first one in
     file order: jitted functions compile from them before a stream fills its shuffle buffer."""
-    in_order = dataclasses.replace(config, shuffle_seed=None, repeat=False)
+    first_source = parse_sources(config.path)[0].path  # every source of a mixture is read with the same sizes
+    in_order = dataclasses.replace(config, path=first_source, shuffle_seed=None, repeat=False)
     for item in iter_indexed_scenarios(in_order):
         state = slim_state(indexed_to_numpy_state(item, in_order))
         return jax.tree.map(lambda a: jax.ShapeDtypeStruct((pool_size,) + np.shape(a),

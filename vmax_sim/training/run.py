@@ -29,8 +29,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from scenariomax.errors import InputError
+from scenariomax.locks import FolderBusyError, FolderLock
 from vmax_sim.agents import make_learner
 from vmax_sim.data import DataConfig, cache_dir
+from vmax_sim.data.mixture import SYNTHETIC, format_sources, parse_sources, source_probabilities
 from vmax_sim.env.learning import LearningEnv
 from vmax_sim.networks import make_encoder
 from vmax_sim.training.checkpoint import CheckpointStore
@@ -43,6 +45,7 @@ from vmax_sim.training.config import (
     config_to_dict,
     pool_refresh,
 )
+from vmax_sim.training.interrupt import StopRequests
 from vmax_sim.training.logger import RunLogger
 from vmax_sim.training.loop import (
     EXPERT_LABELLED,
@@ -69,6 +72,13 @@ class TrainResult:
     env_steps_per_s: float
     final_evaluation: dict | None  # evaluate()'s summary of the trained policy on the held-out split
     summary: dict
+    # why the loop ended: total_env_steps, max_wall_minutes, interrupted (SIGINT / SIGTERM: checkpoint saved),
+    # stop_after_chunks
+    stopped: str = "total_env_steps"
+
+    @property
+    def interrupted(self) -> bool:
+        return self.stopped == "interrupted"
 
 
 def build_learner(config: TrainConfig, env: LearningEnv):
@@ -131,19 +141,41 @@ def _finished_conversion(out: Path) -> bool:
         return False
 
 
-def synthetic_split(num_scenarios: int, seed: int, num_objects: int, print_fn: Callable[[str], None]) -> str:
-    """Shards of `num_scenarios` synthetic scenarios drawn with `seed`, generated once into the cache."""
-    from scenariomax import ConversionError, ConvertSettings, Sizes, SyntheticSource, convert, make_transform
+def synthetic_split(num_scenarios: int, seed: int, num_objects: int, print_fn: Callable[[str], None],
+                    knobs=None) -> str:
+    """Shards of `num_scenarios` synthetic scenarios drawn with `seed` (randomised by the `SyntheticKnobs`
+    `knobs`, None: the default generator), generated once into the cache. Non-default knobs add a short hash
+    of the knobs that differ from their defaults to the folder name."""
+    import hashlib
 
-    out = cache_dir() / "synthetic" / f"seed{seed}-n{num_scenarios}-objects{num_objects}"
+    from scenariomax import (
+        ConversionError,
+        ConvertSettings,
+        Sizes,
+        SyntheticKnobs,
+        SyntheticSource,
+        convert,
+        make_transform,
+    )
+
+    name = f"seed{seed}-n{num_scenarios}-objects{num_objects}"
+    changed = {}
+    if knobs is not None and not knobs.is_default():
+        default = SyntheticKnobs().as_dict()
+        changed = {key: value for key, value in knobs.as_dict().items() if value != default[key]}
+        digest = hashlib.sha256(json.dumps(changed, sort_keys=True).encode()).hexdigest()[:10]
+        name += f"-knobs{digest}"
+    out = cache_dir() / "synthetic" / name
     if _finished_conversion(out):
         return str(out)
-    print_fn(f"generating {num_scenarios} synthetic scenarios (seed {seed}) into {out} (once; cached)")
+    described = f", knobs {', '.join(f'{k}={v}' for k, v in changed.items())}" if changed else ""
+    print_fn(f"generating {num_scenarios} synthetic scenarios (seed {seed}{described}) into {out} (once; cached): "
+             f"{disk_estimate(num_scenarios, num_objects)}")
     sizes = Sizes(num_objects=num_objects)
     transform, transform_settings = make_transform()
     settings = ConvertSettings(out=out, workers=None, sizes=sizes, progress=True, transform=transform,
                                transform_settings=transform_settings, resume=out.exists())
-    source = SyntheticSource(num_scenarios=num_scenarios, seed=seed, sizes=sizes)
+    source = SyntheticSource(num_scenarios=num_scenarios, seed=seed, sizes=sizes, knobs=knobs if changed else None)
     try:
         result = convert(source, settings)  # an interrupted generation continues where it stopped
     except ConversionError:  # our cache folder, left by another version: start it again
@@ -154,11 +186,47 @@ def synthetic_split(num_scenarios: int, seed: int, num_objects: int, print_fn: C
     return str(out)
 
 
+def disk_estimate(num_scenarios: int, num_objects: int) -> str:
+    """What a synthetic split will take on disk, said before it is built."""
+    from vmax_sim.data.cache_admin import MAP_INDEX_BYTES_PER_SCENARIO, SYNTHETIC_BYTES_PER_SCENARIO, human_bytes
+
+    del num_objects  # the 30k-point roadgraph, not the objects, makes most of a record
+    shards = num_scenarios * SYNTHETIC_BYTES_PER_SCENARIO
+    indices = num_scenarios * MAP_INDEX_BYTES_PER_SCENARIO
+    return (f"about {human_bytes(shards)} of shards and {human_bytes(indices)} of map indices once trained on "
+            f"(`vmax-sim cache info` lists the cache, `vmax-sim cache clear` frees it)")
+
+
+def check_shards_exist(path: str) -> None:
+    """One-line InputError when `path` names no shard files."""
+    from scenariomax import list_shard_files
+
+    try:
+        files = list_shard_files(path)
+    except FileNotFoundError as error:
+        raise InputError(str(error)) from None
+    if not files:
+        raise InputError(f"{path}: no shard files")
+
+
 def resolve_data(config: TrainConfig, print_fn: Callable[[str], None]) -> tuple[str, str]:
-    """(train path, eval path): the configured shards, or the embedded synthetic splits (disjoint seeds)."""
+    """(train spec, eval path): the configured shards, or the embedded synthetic splits (disjoint seeds). The
+    training data may be a weighted mixture (`synthetic:0.5,shards/womd:0.5`, vmax_sim.data.mixture), where
+    `synthetic` is the embedded training split."""
     data = config.data
-    train = data.train or synthetic_split(data.synthetic_train_scenarios, data.synthetic_seed, data.num_objects,
-                                          print_fn)
+    sources = []
+    for source in parse_sources(data.train or SYNTHETIC):
+        if source.path == SYNTHETIC:
+            path = synthetic_split(data.synthetic_train_scenarios, data.synthetic_seed, data.num_objects, print_fn,
+                                   knobs=data.synthetic)
+            source = dataclasses.replace(source, path=path)
+        else:
+            check_shards_exist(source.path)
+        sources.append(source)
+    train = format_sources(tuple(sources))
+    if len(sources) > 1:
+        shares = ", ".join(f"{s.path} {p:.0%}" for s, p in zip(sources, source_probabilities(tuple(sources))))
+        print_fn(f"training data: a mixture of {shares}")
     evaluation = data.eval or synthetic_split(data.synthetic_eval_scenarios, data.synthetic_seed + 1,
                                               data.num_objects, print_fn)
     return train, evaluation
@@ -192,8 +260,31 @@ def _host_scalars(stats: dict) -> dict[str, float]:
     return out
 
 
+def planned_env_steps(total_env_steps: int, per_chunk: int) -> int:
+    """The env steps a run of `total_env_steps` takes: whole chunks, so rounded up to a multiple of `per_chunk`."""
+    return -(-total_env_steps // per_chunk) * per_chunk
+
+
+class LastEpisodes:
+    """The progress line's episode values: those of the latest chunk in which episodes finished (a chunk shorter
+    than an episode often finishes none, and its means are undefined)."""
+
+    def __init__(self):
+        self.values: dict[str, float] = {}
+
+    def update(self, scalars: dict[str, float]) -> None:
+        if scalars.get("episodes", 0) > 0:
+            self.values = {"return": scalars["episode/return"], "acc": scalars["episode/accuracy"]}
+
+    def postfix(self) -> dict[str, str]:
+        if not self.values:
+            return {"return": "-", "acc": "-"}  # no episode has finished yet
+        return {name: f"{value:.2f}" for name, value in self.values.items()}
+
+
 # settings a resumed run may change: its length and how often it evaluates and checkpoints
-RESUME_OVERRIDES = ("train.total_env_steps", "train.eval_every", "train.checkpoint_every", "train.keep_checkpoints")
+RESUME_OVERRIDES = ("train.total_env_steps", "train.eval_every", "train.checkpoint_every", "train.keep_checkpoints",
+                    "train.max_wall_minutes")
 
 
 def save_run_config(run_dir: Path, config: TrainConfig) -> None:
@@ -355,6 +446,20 @@ def train(config: TrainConfig, run_dir: str | Path, *, resume: bool = False, pro
     """
     run_dir = Path(run_dir)
     if resume:
+        load_run_config(run_dir)  # a one-line error for a folder that holds no run, before the lock creates it
+    try:
+        with FolderLock(run_dir, "training run"):  # one writer per run directory
+            return _train_locked(config, run_dir, resume=resume, progress=progress, print_fn=print_fn,
+                                 stop_after_chunks=stop_after_chunks, resume_overrides=resume_overrides)
+    except FolderBusyError as error:
+        raise InputError(str(error)) from None
+
+
+def _train_locked(config: TrainConfig | None, run_dir: Path, *, resume: bool, progress: bool,
+                  print_fn: Callable[[str], None], stop_after_chunks: int | None,
+                  resume_overrides: Sequence[str]) -> TrainResult:
+    run_dir = Path(run_dir)
+    if resume:
         saved = load_run_config(run_dir)
         if saved != config and config is not None:
             print_fn("resuming with the run directory's own configuration (config.json)")
@@ -404,53 +509,83 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
     if resume:
         logger.truncate_after(env_steps)
         evaluator.truncate_after(env_steps)
-    bar = _Progress(loop.total_env_steps, env_steps, progress)
+    target = planned_env_steps(loop.total_env_steps, per_chunk)
+    if target != loop.total_env_steps and env_steps == 0:
+        print_fn(f"train.total_env_steps={loop.total_env_steps:,} runs as {target:,} env steps (whole chunks of "
+                 f"{per_chunk:,})")
+    bar = _Progress(target, env_steps, progress)
     wall_before = float(host["wall_s"])
+    budget_s = loop.max_wall_minutes * 60.0 if loop.max_wall_minutes else math.inf
     start = time.perf_counter()
     last_checkpoint = env_steps
     last_eval = env_steps if env_steps > 0 else 0
     chunks = 0
     warned_lost = False
-    try:
-        while env_steps < loop.total_env_steps:
-            tick = time.perf_counter()
-            carry, stats = chunk_fn(carry, pool)
-            scalars = _host_scalars(stats)  # blocks until the chunk is done
-            pool = refresh_pool(pool, stream, pool_refresh(config))
-            env_steps = int(carry.env_steps)
-            elapsed = time.perf_counter() - tick
-            scalars.update({"sps": per_chunk / elapsed, "wall_s": wall_before + time.perf_counter() - start,
-                            "peak_rss_mb": peak_rss_mb(), "data_wait_s": stream.waited_s})
-            logger.log(env_steps, scalars)
-            chunks += 1
-            bar.update(per_chunk, env_steps, {"sps": f"{scalars['sps']:.0f}",
-                                              "return": f"{scalars.get('episode/return', math.nan):.2f}",
-                                              "acc": f"{scalars.get('episode/accuracy', math.nan):.2f}"})
-            if not warned_lost and carry.buffer is not None and (lost := lost_last_observations(carry.buffer)):
-                warned_lost = True
-                print_fn(f"warning: {lost:,} truncated transitions in the replay buffer lost their last observation "
-                         f"(truncated episodes average under {MIN_TRUNCATED_LENGTH} steps); their targets bootstrap "
-                         f"from the next episode's first observation")
-            # evaluations and checkpoints free a lot at once: return it (and what the chunks left) to the system
-            if loop.eval_every and env_steps - last_eval >= loop.eval_every and env_steps < loop.total_env_steps:
-                release_freed_memory()
-                evaluator.run(learner.policy_params(carry.learner), env_steps, scalars["wall_s"])
-                last_eval = env_steps
-                release_freed_memory()
-            if env_steps - last_checkpoint >= loop.checkpoint_every or env_steps >= loop.total_env_steps:
-                release_freed_memory()
-                store.save(env_steps, carry, {"consumed": stream.consumed, "wall_s": scalars["wall_s"],
-                                              "chunks": int(host["chunks"]) + chunks}, with_buffer=loop.save_buffer)
-                last_checkpoint = env_steps
-                release_freed_memory()
-            if stop_after_chunks is not None and chunks >= stop_after_chunks:
-                break
-    finally:
-        bar.close()
-        stream.close()
-        logger.flush()
+    stopped = "total_env_steps"
+    last_episodes = LastEpisodes()
+    with StopRequests(lambda name: print_fn(f"\n{name}: saving a checkpoint after this chunk (again to stop at "
+                                            f"once, losing the steps since the last checkpoint)")) as stop:
+        try:
+            while env_steps < loop.total_env_steps:
+                if wall_before + time.perf_counter() - start >= budget_s:
+                    stopped = "max_wall_minutes"
+                    break
+                tick = time.perf_counter()
+                carry, stats = chunk_fn(carry, pool)
+                scalars = _host_scalars(stats)  # blocks until the chunk is done
+                pool = refresh_pool(pool, stream, pool_refresh(config))
+                env_steps = int(carry.env_steps)
+                elapsed = time.perf_counter() - tick
+                scalars.update({"sps": per_chunk / elapsed, "wall_s": wall_before + time.perf_counter() - start,
+                                "peak_rss_mb": peak_rss_mb(), "data_wait_s": stream.waited_s})
+                logger.log(env_steps, scalars)
+                chunks += 1
+                last_episodes.update(scalars)
+                bar.update(per_chunk, env_steps, {"sps": f"{scalars['sps']:.0f}", **last_episodes.postfix()})
+                if not warned_lost and carry.buffer is not None and (lost := lost_last_observations(carry.buffer)):
+                    warned_lost = True
+                    print_fn(f"warning: {lost:,} truncated transitions in the replay buffer lost their last "
+                             f"observation (truncated episodes average under {MIN_TRUNCATED_LENGTH} steps); their "
+                             f"targets bootstrap from the next episode's first observation")
+                out_of_time = scalars["wall_s"] >= budget_s
+                if stop.requested:
+                    stopped = "interrupted"
+                elif out_of_time:
+                    stopped = "max_wall_minutes"
+                last_chunk = env_steps >= loop.total_env_steps or stop.requested or out_of_time
+                # evaluations and checkpoints free a lot at once: return it (and what the chunks left) to the system
+                if loop.eval_every and env_steps - last_eval >= loop.eval_every and not last_chunk:
+                    release_freed_memory()
+                    evaluator.run(learner.policy_params(carry.learner), env_steps, scalars["wall_s"])
+                    last_eval = env_steps
+                    release_freed_memory()
+                if env_steps - last_checkpoint >= loop.checkpoint_every or last_chunk:
+                    release_freed_memory()
+                    store.save(env_steps, carry, {"consumed": stream.consumed, "wall_s": scalars["wall_s"],
+                                                  "chunks": int(host["chunks"]) + chunks},
+                               with_buffer=loop.save_buffer)
+                    last_checkpoint = env_steps
+                    release_freed_memory()
+                if last_chunk and stopped != "total_env_steps":
+                    break
+                if stop_after_chunks is not None and chunks >= stop_after_chunks:
+                    stopped = "stop_after_chunks"
+                    break
+        finally:
+            bar.close()
+            stream.close()
+            logger.flush()
     wall_s = wall_before + time.perf_counter() - start
-    finished = env_steps >= loop.total_env_steps
+    if stopped == "max_wall_minutes" and last_checkpoint != env_steps:  # the budget ran out before the first chunk
+        store.save(env_steps, carry, {"consumed": stream.consumed, "wall_s": wall_s,
+                                      "chunks": int(host["chunks"]) + chunks}, with_buffer=loop.save_buffer)
+    finished = env_steps >= loop.total_env_steps or stopped == "max_wall_minutes"
+    if stopped == "max_wall_minutes":
+        print_fn(f"stopped at the wall-clock budget (train.max_wall_minutes={loop.max_wall_minutes:g}) after "
+                 f"{env_steps:,} env steps; checkpoint saved in {store.directory / str(env_steps)}")
+    if stopped == "interrupted":
+        print_fn(f"{stop.signal_name}: checkpoint saved at {env_steps:,} env steps in "
+                 f"{store.directory / str(env_steps)}; continue with: vmax-sim train --resume {run_dir}")
     final = None
     carry, pool = carry.replace(buffer=None), None  # done with (the last checkpoint holds the buffer): evaluate without
     release_freed_memory()
@@ -463,10 +598,10 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
     summary = {"run_dir": str(run_dir), "algo": config.algo, "encoder": config.network.name,
                "reward": config.reward.preset, "env_steps": env_steps, "wall_s": wall_s,
                "median_env_steps_per_s": sps, "peak_rss_mb": peak_rss_mb(), "finished": finished,
-               "final_evaluation": final}
+               "stopped": stopped, "final_evaluation": final}
     (run_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
     return TrainResult(run_dir=run_dir, env_steps=env_steps, wall_s=wall_s, env_steps_per_s=sps,
-                       final_evaluation=final, summary=summary)
+                       final_evaluation=final, summary=summary, stopped=stopped)
 
 
 class _Evaluator:
@@ -479,6 +614,7 @@ class _Evaluator:
         self.data = data_config(config, eval_path)
         self.policy = _policy_of(config)
         self.env_config = components(config)[0].env_config
+        self.eval_path = eval_path
         self.log = RunLogger(run_dir, tensorboard=False, file_name="eval.csv")
         self.print_fn = print_fn
 
@@ -516,7 +652,19 @@ class _Evaluator:
     def plot(self, path: Path, train_rows: list[dict]) -> None:
         from vmax_sim.training.plots import plot_learning_curve
 
-        plot_learning_curve(path, self.rows(), train_rows, title=f"{self.config.algo} / {self.config.network.name}")
+        plot_learning_curve(path, self.rows(), train_rows, title=run_title(self.config, self.eval_path))
+
+
+ALGORITHM_NAMES = {"sac": "SAC", "ppo": "PPO", "bc": "BC", "bc_sac": "BC+SAC"}
+
+
+def run_title(config: TrainConfig, eval_path: str) -> str:
+    """'BC (MLP encoder, navigation reward): shards/train -> 100 held-out scenarios of shards/eval': what was
+    trained on what, for pictures."""
+    train = config.data.train or f"{config.data.synthetic_train_scenarios} synthetic scenarios"
+    held_out = "synthetic" if not config.data.eval else Path(eval_path).name
+    return (f"{ALGORITHM_NAMES.get(config.algo, config.algo)} ({config.network.name.upper()} encoder, "
+            f"{config.reward.preset} reward): {train} -> {config.train.eval_scenarios} held-out {held_out} scenarios")
 
 
 @functools.lru_cache(maxsize=8)
