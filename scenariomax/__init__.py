@@ -51,6 +51,7 @@ _LAZY = {
     "ConversionError": "scenariomax.pipeline",
     "convert": "scenariomax.pipeline",
     "make_transform": "scenariomax.enrich.transform",
+    "fit_to_budget": "scenariomax.enrich.budget",
     "SyntheticSource": "scenariomax.sources.synthetic",
     "SyntheticKnobs": "scenariomax.sources.synthetic",
     "draw_scenario": "scenariomax.render",
@@ -80,7 +81,7 @@ __all__ = [
     # the schema (module and sizes)
     "schema", "Sizes", "ShardSchema", "load_schema", "default_sizes",
     # conversion, enrichment and the synthetic source
-    "convert", "ConvertSettings", "make_transform", "SyntheticSource", "SyntheticKnobs",
+    "convert", "ConvertSettings", "make_transform", "fit_to_budget", "SyntheticSource", "SyntheticKnobs",
     # pictures and inspection
     "render_scenario", "draw_scenario", "inspect_shards", "format_report", "load_scenario",
     # errors a user can cause

@@ -16,7 +16,7 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
-from scenariomax.codec import SchemaError, decode_scenario, encode_scenario
+from scenariomax.codec import BudgetError, SchemaError, decode_scenario, encode_scenario
 from scenariomax.errors import InputError
 from scenariomax.io.example import ExampleError
 from scenariomax.io.tfrecord import RecordError, TFRecordWriter, iter_record_spans, iter_records, read_record_at
@@ -217,7 +217,12 @@ def _write_temp_shards(scenarios: Iterable[Scenario], out: Path, sizes: Sizes | 
                     entries[-1].update(num_records=writer.num_records, **_finish_temp_shard(writer.path))
                 entries.append({"temp_file": f".{split}-{len(entries):05d}.tfrecord.tmp"})
                 writer = TFRecordWriter(out / entries[-1]["temp_file"])
-            writer.write(encode_scenario(scenario, sizes))
+            try:
+                record = encode_scenario(scenario, sizes)
+            except BudgetError as error:
+                raise BudgetError(f"{scenario.scenario_id}: {error}; pass the scenarios' own sizes, or fit each "
+                                  f"one first with scenariomax.fit_to_budget(scenario, sizes)") from None
+            writer.write(record)
         if writer is not None:
             writer.close()
             entries[-1].update(num_records=writer.num_records, **_finish_temp_shard(writer.path))
@@ -257,11 +262,17 @@ def write_shards(scenarios: Iterable[Scenario], out: str | os.PathLike, sizes: S
     """
     out = Path(out)
     previous = _claim_folder(out, overwrite)
+    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     for entry in out.iterdir():
         if _is_own_temp(entry.name):
             entry.unlink()  # leftovers of an interrupted write_shards
-    temps = _write_temp_shards(scenarios, out, sizes, shard_size, split)
+    try:
+        temps = _write_temp_shards(scenarios, out, sizes, shard_size, split)
+    except BaseException:
+        if created and not any(out.iterdir()):
+            out.rmdir()  # a failed write leaves no empty folder of ours behind
+        raise
     if previous is not None:  # the earlier output goes; until the new one is complete the folder reads as interrupted
         write_manifest(out, {**previous, "state": "running"})
         for name in sorted(_listed_names(previous)):
