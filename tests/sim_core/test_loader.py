@@ -153,6 +153,21 @@ def test_bad_paths_and_broken_records_give_one_line_errors(tmp_path):
     assert "broken" in str(error.value) and "\n" not in str(error.value)
 
 
+@pytest.mark.parametrize("field, bad", [("x", np.nan), ("length", -4.5)])
+def test_a_record_validate_rejects_stops_the_loader_naming_file_and_record(tmp_path, field, bad):
+    import dataclasses
+
+    good = make_scenario(1)
+    values = getattr(good, field).copy()
+    values[0, 3] = bad  # the SDC, a valid step
+    scenariomax.write_shards([make_scenario(0), dataclasses.replace(good, **{field: values})], tmp_path / "bad",
+                             sizes=SMALL_SIZES)
+    with pytest.raises(InputError) as error:
+        list(iter_scenarios(small_config(tmp_path / "bad")))
+    message = str(error.value)
+    assert "train-00000-of-00001.tfrecord record 1" in message and field in message and "\n" not in message
+
+
 def test_config_rejects_nonsense():
     with pytest.raises(ValueError, match="batch_size"):
         DataConfig(path="x", batch_size=0)

@@ -48,8 +48,16 @@ def _records_once(files: list[Path], rng: np.random.Generator | None,
 
 
 def _read(item: IndexedRecord) -> IndexedScenario:
+    """The record's scenario, checked as `scenariomax validate` checks it (~1 ms): a bad value stops the run in one
+    line naming the file and record, before it reaches the simulator."""
     record, source = item
-    return record.read(), source
+    scenario = record.read()
+    problems = scenario.validate()
+    if problems:
+        raise InputError(f"{record.file} record {record.index} ({scenario.scenario_id}): {problems[0]}"
+                         f"{f' (and {len(problems) - 1} more)' if len(problems) > 1 else ''}; `scenariomax validate` "
+                         f"lists every problem")
+    return scenario, source
 
 
 def _shuffled(scenarios: Iterable, rng: np.random.Generator, buffer_size: int) -> Iterator:
