@@ -13,16 +13,18 @@ subclass `ValueError` like `InputError` does: `ShardReadError` (`scenariomax.sha
 from __future__ import annotations
 
 import errno
+import os
 
 
 class InputError(ValueError):
     """A raw input file is unreadable or malformed. The message is one line naming file and reason."""
 
 
-def describe_os_error(error: OSError, resumable: bool = False) -> str:
+def describe_os_error(error: OSError, resumable: bool = False, where: str | os.PathLike | None = None) -> str:
     """One line for an OS error (read-only or full disk, permission, missing file): the path once, the problem,
-    what to do. `resumable`: the command can continue where it stopped (convert --resume)."""
-    where = error.filename or "?"
+    what to do. `resumable`: the command can continue where it stopped (convert --resume). `where`: the folder
+    being written, named when the error carries no file name (a full disk seen by a library's writer)."""
+    where = error.filename or where or "the output folder"
     if error.errno == errno.ENOSPC:
         advice = "free some space, then rerun" + (" with --resume" if resumable else "")
     elif error.errno in (errno.EROFS, errno.EACCES, errno.EPERM):

@@ -54,3 +54,13 @@ def test_the_lock_dies_with_its_process_and_the_folder_converts(holder, tmp_path
     again = convert(SyntheticSource(num_scenarios=2, seed=0, sizes=sizes),
                     ConvertSettings(out=tmp_path / "out", workers=1, sizes=sizes, progress=False, overwrite=True))
     assert again.num_scenarios == 2
+
+
+def test_an_os_error_without_a_file_name_names_the_folder_written():
+    import errno
+
+    from scenariomax.errors import describe_os_error
+
+    full = OSError(errno.ENOSPC, "No space left on device")  # as a library's writer raises it
+    line = describe_os_error(full, resumable=True, where="runs/sac")
+    assert line.startswith("runs/sac: No space left on device; free some space") and "?" not in line

@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from scenariomax.errors import InputError
+from scenariomax.errors import InputError, describe_os_error
 from scenariomax.locks import FolderBusyError, FolderLock
 from vmax_sim.agents import make_learner
 from vmax_sim.data import DataConfig, cache_dir
@@ -453,6 +453,8 @@ def train(config: TrainConfig, run_dir: str | Path, *, resume: bool = False, pro
                                  stop_after_chunks=stop_after_chunks, resume_overrides=resume_overrides)
     except FolderBusyError as error:
         raise InputError(str(error)) from None
+    except OSError as error:  # a full disk or a lost permission, in our code or a library's writer
+        raise InputError(describe_os_error(error, resumable=True, where=run_dir)) from None
 
 
 def _train_locked(config: TrainConfig | None, run_dir: Path, *, resume: bool, progress: bool,
