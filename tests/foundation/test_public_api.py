@@ -93,7 +93,7 @@ def test_vmax_sim_imports_only_the_public_scenariomax_api():
 @pytest.mark.parametrize("line, problem", [
     ("from scenariomax.enrich.budget import sdc_positions", "from scenariomax.enrich.budget, not a public module"),
     ("import scenariomax.pipeline", "scenariomax.pipeline, not a public module"),
-    ("from scenariomax import fit_to_budget", "fit_to_budget, which scenariomax does not export"),
+    ("from scenariomax import objects_to_keep", "objects_to_keep, which scenariomax does not export"),
     ("from scenariomax.render import _import_pyplot", "private name _import_pyplot"),
     ("from scenariomax import render as r\nplt = r._import_pyplot()", "private r._import_pyplot"),
     ("import scenariomax\nscenariomax.enrich.budget.sdc_positions", "scenariomax.enrich, which scenariomax does not"),

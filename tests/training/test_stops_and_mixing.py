@@ -30,6 +30,7 @@ def _quiet(line: str) -> None:
     pass
 
 
+@pytest.mark.slow  # a training run and its final evaluation (~30 s on 2 cores)
 def test_the_wall_clock_budget_stops_with_a_final_checkpoint_and_evaluation(synthetic_shards, tmp_path):
     # a budget of 0.06 s: the run stops after its first chunk, far short of its 100,000 env steps
     config = tiny_config(synthetic_shards, "bc", "train.total_env_steps=100000", "train.max_wall_minutes=0.001")
@@ -104,11 +105,15 @@ def test_mixture_specs_parse_and_refuse_bad_weights():
         parse_sources("a:0,b:1")
 
 
-def test_a_mixture_trains_and_a_missing_source_is_named(synthetic_shards, second_shards, tmp_path):
+@pytest.mark.slow  # a training run and its final evaluation (~25 s on 2 cores)
+def test_a_mixture_trains(synthetic_shards, second_shards, tmp_path):
     config = tiny_config(synthetic_shards, "bc", f"data.train={synthetic_shards}:1,{second_shards}:1",
                          "train.total_env_steps=20", "train.eval_every=0")
     result = train(config, tmp_path / "mixed", progress=False, print_fn=_quiet)
     assert result.summary["finished"]
+
+
+def test_a_missing_mixture_source_is_named_before_anything_runs(synthetic_shards, tmp_path):
     missing = tiny_config(synthetic_shards, "bc", f"data.train={synthetic_shards}:1,{tmp_path / 'nope'}:1")
     with pytest.raises(InputError, match="nope"):
         train(missing, tmp_path / "missing", progress=False, print_fn=_quiet)
