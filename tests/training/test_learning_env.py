@@ -59,6 +59,7 @@ def test_collision_terminates_with_the_safety_penalty():
     assert not bool(jnp.any(out.terminated[:, 0]))  # the cruise episode keeps going
 
 
+@pytest.mark.slow  # ~60 s on 2 cores (it compiles several repeat counts): the default suite stays under 10 minutes
 def test_a_repeated_action_is_held_for_k_steps_and_stops_at_the_episode_end():
     """action_repeat 4: one transition is 4 simulator steps (timestep +4, the rewards of the 4 steps summed);
     the 80-step episode takes 20 transitions; a crash within the 4 steps ends the transition there."""
