@@ -227,9 +227,15 @@ def resolve_data(config: TrainConfig, print_fn: Callable[[str], None]) -> tuple[
     if len(sources) > 1:
         shares = ", ".join(f"{s.path} {p:.0%}" for s, p in zip(sources, source_probabilities(tuple(sources))))
         print_fn(f"training data: a mixture of {shares}")
-    evaluation = data.eval or synthetic_split(data.synthetic_eval_scenarios, data.synthetic_seed + 1,
-                                              data.num_objects, print_fn)
-    return train, evaluation
+    return train, resolve_eval_data(config, print_fn)
+
+
+def resolve_eval_data(config: TrainConfig, print_fn: Callable[[str], None]) -> str:
+    """The held-out shards of a run (the synthetic evaluation split when none were named): all that evaluating a
+    trained run needs, whatever became of its training data."""
+    data = config.data
+    return data.eval or synthetic_split(data.synthetic_eval_scenarios, data.synthetic_seed + 1, data.num_objects,
+                                        print_fn)
 
 
 # ----------------------------------------------------------------------------- helpers

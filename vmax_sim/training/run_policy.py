@@ -23,7 +23,7 @@ from vmax_sim.map_index.structure import MapIndexConfig
 from vmax_sim.observation import LIGHT_FEATURES, OBJECT_FEATURES, ROADGRAPH_FEATURES, Observation
 from vmax_sim.policies.base import Policy
 from vmax_sim.training.checkpoint import CheckpointStore
-from vmax_sim.training.run import components, data_config, load_run_config, resolve_data
+from vmax_sim.training.run import components, data_config, load_run_config, resolve_eval_data
 
 
 @dataclasses.dataclass(frozen=True)
@@ -81,7 +81,7 @@ def evaluate_run(run_dir: str | Path, data: str | None = None, mode: str = "non_
     loaded = load_trained_policy(run_dir, step)
     config = loaded.config
     # notes go to stderr: stdout may be carrying `evaluate --json`
-    path = data or resolve_data(config, lambda line: print(line, file=sys.stderr))[1]
+    path = data or resolve_eval_data(config, lambda line: print(line, file=sys.stderr))
     total = expected_num_scenarios(path, num_scenarios) if progress else None
     with Progress(f"evaluating {Path(run_dir).name}", total, "scenarios", enabled=progress) as shown:
         return evaluate(loaded.policy, data_config(config, path, batch_size=batch_size), mode=mode,

@@ -36,10 +36,10 @@ def run_data(entries: Sequence[str], data: str | None, print_fn: Callable[[str],
     """`data`, else the held-out split of the first training run among `entries` (None when there is none)."""
     if data:
         return data
-    from vmax_sim.training.run import load_run_config, resolve_data
+    from vmax_sim.training.run import load_run_config, resolve_eval_data
 
     runs = [entry for entry in entries if is_training_run(entry)]
-    return resolve_data(load_run_config(runs[0]), print_fn)[1] if runs else None
+    return resolve_eval_data(load_run_config(runs[0]), print_fn) if runs else None
 
 
 def _plan(target: str, policies: Sequence[str] | None, data: str | None,
