@@ -132,9 +132,13 @@ def _synthetic_knobs(ctx, param, items):
 @click.option("--num-objects", type=int, default=128, show_default=True, help="Object slots per scenario.")
 @click.option("--roadgraph-points", type=int, default=30000, show_default=True, help="Roadgraph points.")
 @click.option("--no-enrich", is_flag=True, help="Skip enrichment (paths, controllable labels, lights).")
+@click.option("--sdc-paths", type=click.Choice(["auto", "waymo", "reconstruct"]), default="auto", show_default=True,
+              help="WOMD Scenario protos: Waymo's own SDC paths (1.3.1+) when present (auto), only Waymo's, or "
+                   "always our reconstruction.")
 @_pipeline_options
 def convert(dataset, src, maps, num_scenarios, seed, knobs, stride_steps, num_objects, roadgraph_points, no_enrich,
-            out, workers, shard_size, resume, overwrite, split, engine, address, num_paths, points_per_path):
+            sdc_paths, out, workers, shard_size, resume, overwrite, split, engine, address, num_paths,
+            points_per_path):
     """Convert a dataset (or generate synthetic scenarios) into shards + manifest.json."""
     import dataclasses
 
@@ -145,8 +149,10 @@ def convert(dataset, src, maps, num_scenarios, seed, knobs, stride_steps, num_ob
 
     sizes = Sizes(num_objects=num_objects, num_roadgraph=roadgraph_points, num_paths=num_paths,
                   num_points_per_path=points_per_path)
+    if sdc_paths != "auto" and dataset != "womd":
+        raise click.UsageError(f"--sdc-paths applies to --dataset womd, not {dataset}")
     source = make_source(dataset, src=src, sizes=sizes, num_scenarios=num_scenarios, seed=seed, maps=maps,
-                         stride_steps=stride_steps)
+                         stride_steps=stride_steps, sdc_paths=sdc_paths)
     if knobs is not None:
         source = dataclasses.replace(source, knobs=knobs)
     _run_conversion(source, out, workers, shard_size, resume, overwrite, split, engine, address, sizes,

@@ -17,7 +17,7 @@ from scenariomax.enrich.ids import with_missing_ids_assigned
 from scenariomax.enrich.lane_graph import LaneGraphSettings, lane_graph_to_arrays, scenario_lane_graph
 from scenariomax.enrich.lanes import extract_lanes
 from scenariomax.enrich.orientation import with_edges_oriented
-from scenariomax.enrich.paths import PathSettings, logged_track, paths_to_arrays, search_paths
+from scenariomax.enrich.paths import PATHS_SOURCE, PathSettings, logged_track, paths_to_arrays, search_paths
 from scenariomax.enrich.speed_limits import with_speed_limits
 from scenariomax.enrich.traffic_lights import LightSettings, with_inferred_lights
 from scenariomax.scenario import Scenario
@@ -81,7 +81,7 @@ def enrich_scenario(scenario: Scenario, settings: EnrichSettings = EnrichSetting
     changes: dict = {}
     if rebuilt and settings.rebuild_lane_graph:
         changes.update(lane_graph_to_arrays(lanes, graph, settings.num_lane_links))
-    if settings.build_paths:
+    if settings.build_paths and not scenario.metadata.get(PATHS_SOURCE):  # a source's own paths are kept
         changes.update(_sdc_paths(scenario, lanes, graph, settings))
     if settings.label_controllable:
         controllable = controllable_mask(scenario, lanes, settings.controllable)

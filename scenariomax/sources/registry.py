@@ -14,8 +14,10 @@ DATASETS = ("synthetic", "womd", "nuplan", "av2", "scenarionet", "gpudrive")
 
 
 def make_source(dataset: str, *, src: str | None = None, sizes: Sizes | None = None, num_scenarios: int = 100,
-                seed: int = 0, maps: str | None = None, stride_steps: int | None = None) -> Source:
-    """Builds the Source for a dataset name; raises InputError with a one-line reason."""
+                seed: int = 0, maps: str | None = None, stride_steps: int | None = None,
+                sdc_paths: str = "auto") -> Source:
+    """Builds the Source for a dataset name; raises InputError with a one-line reason. `sdc_paths`
+    (WOMD Scenario protos): "auto" (Waymo's own paths when present), "waymo" or "reconstruct"."""
     sizes = sizes or Sizes()
     if dataset == "synthetic":
         from scenariomax.sources.synthetic import SyntheticSource
@@ -31,7 +33,7 @@ def make_source(dataset: str, *, src: str | None = None, sizes: Sizes | None = N
     if dataset == "womd":
         from scenariomax.sources.womd import WomdSource
 
-        return WomdSource(src=src, sizes=sizes)
+        return WomdSource(src=src, sizes=sizes, sdc_paths=sdc_paths)
     if dataset == "av2":
         from scenariomax.sources.av2 import Av2Source
 

@@ -18,7 +18,19 @@ from scenariomax.enrich.orientation import orient_road_edges
 from scenariomax.enrich.roadgraph import LaneLinks, MapPolyline, lane_graph_arrays, polylines_to_roadgraph
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
+from scenariomax.sources.base import MANIFEST_NOTES
 from scenariomax.sources.womd import proto
+from scenariomax.sources.womd.sdc_paths import (
+    PATHS_FROM_WAYMO,
+    PATHS_SOURCE,
+    SDC_PATHS_AUTO,
+    SDC_PATHS_MODES,
+    SDC_PATHS_RECONSTRUCT,
+    SDC_PATHS_WAYMO,
+    SdcPathError,
+    decode_sdc_paths,
+    waymo_path_arrays,
+)
 from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, window_starts, wrap_angle
 
 MPH_TO_MPS = 0.44704
@@ -174,10 +186,31 @@ def _window(tracks: dict, start: int, num_timesteps: int, seconds: np.ndarray) -
     )
 
 
-def scenario_windows(message, sizes: Sizes,
-                     stride: int = DEFAULT_WINDOW_STRIDE) -> Iterator[Scenario | ScenarioBuildError]:
+def _waymo_paths(message, sdc_paths: str, sizes: Sizes) -> dict | None:
+    """Waymo's paths as our path arrays, or None when reconstruction is asked for (or, in "auto", when the
+    proto has none). Raises ScenarioBuildError when "waymo" is asked for and they are missing or unreadable."""
+    if sdc_paths not in SDC_PATHS_MODES:
+        raise ValueError(f"sdc_paths must be one of {SDC_PATHS_MODES}, got {sdc_paths!r}")
+    if sdc_paths == SDC_PATHS_RECONSTRUCT or (sdc_paths == SDC_PATHS_AUTO and not message.sdc_paths):
+        return None
+    try:
+        paths = decode_sdc_paths(message)
+    except SdcPathError as error:
+        raise ScenarioBuildError(f"scenario {message.scenario_id or 'unnamed'}: {error}") from None
+    if not paths:
+        if sdc_paths == SDC_PATHS_AUTO:
+            return None  # all of them empty: as if absent
+        raise ScenarioBuildError(f"scenario {message.scenario_id or 'unnamed'}: no Waymo SDC paths in the proto "
+                                 "(WOMD before 1.3.1?); use --sdc-paths auto or reconstruct")
+    return waymo_path_arrays(paths, sizes.num_paths, sizes.num_points_per_path)
+
+
+def scenario_windows(message, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE,
+                     sdc_paths: str = SDC_PATHS_AUTO) -> Iterator[Scenario | ScenarioBuildError]:
     """Every 91-step window of one WOMD Scenario message, fitted to the budget. Windows that cannot be
-    built are yielded as ScenarioBuildError (the caller records them as Failures)."""
+    built are yielded as ScenarioBuildError (the caller records them as Failures). `sdc_paths` chooses
+    who makes the SDC paths (see sdc_paths.py): Waymo's paths start at the log's own current step, so
+    they go to that window only; the others are left to the reconstruction."""
     scenario_id = message.scenario_id or "unnamed"
     num_steps = len(message.timestamps_seconds)
     current = message.current_time_index if message.HasField("current_time_index") else sizes.num_past
@@ -185,6 +218,11 @@ def scenario_windows(message, sizes: Sizes,
     if not starts:
         yield ScenarioBuildError(f"scenario {scenario_id}: {num_steps} steps with current index {current} "
                                  f"cannot hold a {sizes.num_timesteps}-step window")
+        return
+    try:
+        waymo_paths = _waymo_paths(message, sdc_paths, sizes)
+    except ScenarioBuildError as error:
+        yield error
         return
     tracks = track_arrays(message)
     objects = _object_fields(message)
@@ -200,14 +238,23 @@ def scenario_windows(message, sizes: Sizes,
             yield ScenarioBuildError(f"scenario {window_id}: the SDC is not valid at the current step")
             continue
         per_object = dict(objects)
-        if start + sizes.num_past != current:  # prediction labels belong to the log's own current step
+        at_log_current = start + sizes.num_past == current
+        if not at_log_current:  # prediction labels belong to the log's own current step
             for name in ("tracks_to_predict", "objects_of_interest"):
                 per_object[name] = np.zeros_like(objects[name])
             per_object["difficulty_level"] = np.zeros_like(objects["difficulty_level"])
+        paths, metadata = {}, {"log_start_step": start, "log_num_steps": num_steps}
+        if waymo_paths is not None and at_log_current:
+            paths = waymo_paths
+            metadata.update({PATHS_SOURCE: PATHS_FROM_WAYMO, MANIFEST_NOTES: {PATHS_SOURCE: PATHS_FROM_WAYMO}})
+        elif waymo_paths is not None and sdc_paths == SDC_PATHS_WAYMO:
+            yield ScenarioBuildError(f"scenario {window_id}: Waymo's SDC paths start at the log's current step "
+                                     f"{current}, not this window's ({start + sizes.num_past})")
+            continue
         scenario = Scenario(
             scenario_id=window_id, source_dataset=SOURCE_NAME, current_time_index=sizes.num_past,
-            **per_object, **window, **roadgraph, **lane_graph,
+            **per_object, **window, **roadgraph, **lane_graph, **paths,
             **traffic_light_arrays(message, start, sizes.num_timesteps),
-            metadata={"log_start_step": start, "log_num_steps": num_steps},
+            metadata=metadata,
         )
         yield fit_to_budget(scenario, sizes)

@@ -18,6 +18,10 @@ _OPTIONAL, _REPEATED = _F.LABEL_OPTIONAL, _F.LABEL_REPEATED
 _DOUBLE, _FLOAT, _BOOL = _F.TYPE_DOUBLE, _F.TYPE_FLOAT, _F.TYPE_BOOL
 _INT32, _INT64, _STRING, _MESSAGE = _F.TYPE_INT32, _F.TYPE_INT64, _F.TYPE_STRING, _F.TYPE_MESSAGE
 
+# Scenario.sdc_paths: after the lidar (12) and camera-token (13) fields. The public waymo-open-dataset tree
+# we could read (99a4cb3, April 2025) predates the field, so this number is the one place to correct.
+SDC_PATHS_FIELD = 14
+
 # (message name, [(field name, number, type, label, message type name or None)]), from the public
 # waymo-open-dataset protos (scenario.proto, map.proto). Enum fields are int32 on the wire.
 _MESSAGES = (
@@ -64,13 +68,20 @@ _MESSAGES = (
                ("states", 3, _MESSAGE, _REPEATED, "ObjectState")]),
     ("DynamicMapState", [("lane_states", 1, _MESSAGE, _REPEATED, "TrafficSignalLaneState")]),
     ("RequiredPrediction", [("track_index", 1, _INT32, _OPTIONAL, None), ("difficulty", 2, _INT32, _OPTIONAL, None)]),
+    # Waymo's own SDC paths (WOMD 1.3.1+): parallel per-point arrays plus the path's on-route flag. The
+    # numbers below are ours to check against the released scenario.proto (see SDC_PATHS_FIELD).
+    ("SDCPath", [("x", 1, _DOUBLE, _REPEATED, None), ("y", 2, _DOUBLE, _REPEATED, None),
+                 ("z", 3, _DOUBLE, _REPEATED, None), ("arc_length", 4, _DOUBLE, _REPEATED, None),
+                 ("ids", 5, _INT64, _REPEATED, None), ("valid", 6, _BOOL, _REPEATED, None),
+                 ("on_route", 7, _BOOL, _OPTIONAL, None)]),
     ("Scenario", [("timestamps_seconds", 1, _DOUBLE, _REPEATED, None), ("tracks", 2, _MESSAGE, _REPEATED, "Track"),
                   ("objects_of_interest", 4, _INT32, _REPEATED, None),
                   ("scenario_id", 5, _STRING, _OPTIONAL, None), ("sdc_track_index", 6, _INT32, _OPTIONAL, None),
                   ("dynamic_map_states", 7, _MESSAGE, _REPEATED, "DynamicMapState"),
                   ("map_features", 8, _MESSAGE, _REPEATED, "MapFeature"),
                   ("current_time_index", 10, _INT32, _OPTIONAL, None),
-                  ("tracks_to_predict", 11, _MESSAGE, _REPEATED, "RequiredPrediction")]),
+                  ("tracks_to_predict", 11, _MESSAGE, _REPEATED, "RequiredPrediction"),
+                  ("sdc_paths", SDC_PATHS_FIELD, _MESSAGE, _REPEATED, "SDCPath")]),
 )
 _ONEOF_FIELDS = {"MapFeature": ("lane", "road_line", "road_edge", "stop_sign", "crosswalk", "speed_bump", "driveway")}
 

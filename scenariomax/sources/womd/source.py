@@ -18,6 +18,7 @@ from scenariomax.sources.womd.tfexample import (
     looks_like_tf_example,
     tf_example_to_scenario,
 )
+from scenariomax.sources.womd.sdc_paths import SDC_PATHS_AUTO, SDC_PATHS_MODES
 from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE
 
 FILE_PATTERN = "*tfrecord*"
@@ -38,17 +39,21 @@ def one_line(error: BaseException) -> str:
 @dataclasses.dataclass(frozen=True)
 class WomdSource:
     """WOMD TFRecord files. `womd_format`: "auto" (detected per file from its first record),
-    "scenario" (Scenario protos) or "tf_example" (motion tf.Examples)."""
+    "scenario" (Scenario protos) or "tf_example" (motion tf.Examples). `sdc_paths`: "auto" (Waymo's
+    own paths when a Scenario proto carries them, else reconstructed), "waymo" or "reconstruct"."""
 
     src: str
     sizes: Sizes | None = None
     womd_format: str = FORMAT_AUTO
     window_stride: int = DEFAULT_WINDOW_STRIDE
+    sdc_paths: str = SDC_PATHS_AUTO
     name: str = SOURCE_NAME
 
     def __post_init__(self) -> None:
         if self.womd_format not in _FORMATS:
             raise ValueError(f"womd_format must be one of {_FORMATS}, got {self.womd_format!r}")
+        if self.sdc_paths not in SDC_PATHS_MODES:
+            raise ValueError(f"sdc_paths must be one of {SDC_PATHS_MODES}, got {self.sdc_paths!r}")
         if self.window_stride <= 0:
             raise ValueError(f"window_stride must be positive, got {self.window_stride}")
 
@@ -61,7 +66,7 @@ class WomdSource:
 
     def settings(self) -> dict:
         return {"womd_format": self.womd_format, "window_stride": self.window_stride,
-                "sizes": self.budget.as_dict()}
+                "sdc_paths": self.sdc_paths, "sizes": self.budget.as_dict()}
 
     def read_unit(self, unit: str) -> Iterator[UnitItem]:
         if not os.path.isfile(unit):
@@ -85,7 +90,7 @@ class WomdSource:
                 return
             message = parse_scenario(record)
             ref = message.scenario_id or ref
-            for item in scenario_windows(message, self.budget, self.window_stride):
+            for item in scenario_windows(message, self.budget, self.window_stride, self.sdc_paths):
                 yield Failure(unit, ref, one_line(item)) if isinstance(item, Exception) else item
         except Exception as error:  # noqa: BLE001 - fault isolation: one bad scenario never stops the file
             yield Failure(unit, ref, one_line(error))
