@@ -6,13 +6,22 @@ Agents: for each controllable agent besides the SDC with a per-agent path (`agen
 its valid logged positions (current step on) within 1 m of it; "covered" when >= 95%. Agents without a
 path are counted apart (all `num_agent_paths` slots taken, or no lane near their start).
 `--per-scenario` lists each scenario's SDC coverage and the agents below 95% or without a path.
+
+Waymo's paths against ours (`--compare-waymo RAW`): WOMD Scenario protos that carry Waymo's own SDC paths
+(1.3.1+) are converted twice, with `--sdc-paths auto` (Waymo's where present) and `--sdc-paths reconstruct`
+(ours), and each scenario that got Waymo's paths is compared: the distance between the two first on-route
+paths (both directions, over the length both cover) and the share of the logged SDC positions within 1 m of
+each source's on-route paths.
 Usage: python benchmarks/sdc_path_quality.py SHARDS [--json] [--per-scenario]
+       python benchmarks/sdc_path_quality.py --compare-waymo RAW_WOMD [--json] [--per-scenario]
 """
 
 from __future__ import annotations
 
 import json
 import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 
@@ -112,6 +121,109 @@ def path_quality(path: str, per_scenario: bool = False) -> dict:
     return stats
 
 
+# --- Waymo's paths against ours -------------------------------------------------------------------
+
+def _first_on_route(scenario) -> np.ndarray | None:
+    """(q, 2) points of the first on-route path, or None."""
+    for p in np.flatnonzero(scenario.path_on_route):
+        line = scenario.path_xyz[p][scenario.path_valid[p]][:, :2].astype(np.float64)
+        if len(line) >= 2:
+            return line
+    return None
+
+
+def path_gap(ours: np.ndarray, theirs: np.ndarray) -> dict[str, float]:
+    """Distances between two paths from the same start, over the length both cover: each path's points
+    within the other's length, projected onto the other (both directions). -> mean and max, metres."""
+    length = min(float(np.linalg.norm(np.diff(ours, axis=0), axis=1).sum()),
+                 float(np.linalg.norm(np.diff(theirs, axis=0), axis=1).sum()))
+    dists = []
+    for a, b in ((ours, theirs), (theirs, ours)):
+        cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(a, axis=0), axis=1))])
+        dists.append(project_to_polyline(a[cum <= length + 1e-6], b)[0])
+    dist = np.concatenate(dists)
+    return {"mean_m": float(dist.mean()), "max_m": float(dist.max()), "common_length_m": length}
+
+
+def _log_coverage(scenario) -> float | None:
+    """Share of the SDC's logged positions (current step on) within 1 m of an on-route path (None: none)."""
+    dist = scenario_path_distances(scenario)
+    if dist is None:
+        return None
+    return float((dist <= TOLERANCE_M).mean()) if dist.size else 1.0
+
+
+def _convert(raw: str, out: Path, sdc_paths: str) -> tuple[dict, set]:
+    """(scenario id -> scenario, ids whose paths are Waymo's per the manifest notes), converted as
+    `scenariomax convert --dataset womd --sdc-paths ...` does."""
+    from scenariomax.enrich.transform import make_transform
+    from scenariomax.pipeline import ConvertSettings, convert
+    from scenariomax.sources.womd import WomdSource
+
+    transform, settings = make_transform()
+    convert(WomdSource(raw, sdc_paths=sdc_paths), ConvertSettings(out=out, workers=1, progress=False,
+                                                                  transform=transform,
+                                                                  transform_settings=settings))
+    if not (out / "manifest.json").is_file():
+        return {}, set()
+    notes = json.loads((out / "manifest.json").read_text()).get("notes", [])
+    from_waymo = {n["scenario"] for n in notes if n["notes"].get("paths_source") == "waymo"}
+    return {s.scenario_id: s for s in read_shards(str(out))}, from_waymo
+
+
+def compare_with_waymo(raw: str, per_scenario: bool = False) -> dict:
+    """Waymo's SDC paths against our reconstruction on the same WOMD Scenario protos."""
+    with tempfile.TemporaryDirectory(prefix="sdc-paths-") as tmp:
+        waymo, from_waymo = _convert(raw, Path(tmp) / "waymo", "auto")
+        ours, _ = _convert(raw, Path(tmp) / "ours", "reconstruct")
+    rows = []
+    for sid, theirs in waymo.items():
+        if sid not in ours:
+            continue
+        a, b = _first_on_route(ours[sid]), _first_on_route(theirs)
+        rows.append({"scenario_id": sid,
+                     "waymo_paths": int(theirs.path_valid.any(axis=1).sum()) if sid in from_waymo else 0,
+                     "our_paths": int(ours[sid].path_valid.any(axis=1).sum()),
+                     "gap": path_gap(a, b) if a is not None and b is not None else None,
+                     "ours_log_within_1m": _log_coverage(ours[sid]),
+                     "waymo_log_within_1m": _log_coverage(theirs)})
+    compared = [r for r in rows if r["waymo_paths"]]
+    gaps = [r["gap"] for r in compared if r["gap"] is not None]
+
+    def covered(key: str) -> int:
+        return sum(r[key] is not None and r[key] >= COVERED for r in compared)
+
+    stats = {
+        "scenarios": len(waymo), "in_both": len(rows),
+        "note": "scenarios are compared only when the Scenario proto carries Waymo's paths (WOMD 1.3.1+)",
+        "compared": len(compared),
+        "both_on_route": len(gaps),
+        "gap_mean_m": float(np.mean([g["mean_m"] for g in gaps])) if gaps else None,
+        "gap_max_m": float(np.max([g["max_m"] for g in gaps])) if gaps else None,
+        "ours_log_covered": covered("ours_log_within_1m"),
+        "waymo_log_covered": covered("waymo_log_within_1m"),
+    }
+    if per_scenario:
+        stats["per_scenario"] = compared
+    return stats
+
+
+def _compare_table(stats: dict) -> str:
+    if not stats["compared"]:
+        return (f"scenarios {stats['scenarios']}: none carries Waymo's SDC paths (WOMD 1.3.1+ Scenario protos "
+                "do), nothing to compare")
+    gap = "-" if stats["gap_mean_m"] is None else f"{stats['gap_mean_m']:.2f} m mean, {stats['gap_max_m']:.2f} m max"
+    lines = [f"scenarios with Waymo's paths {stats['compared']} / {stats['scenarios']}; both with an on-route "
+             f"path {stats['both_on_route']}; ours vs Waymo's on-route path: {gap}; log covered (>=95% within "
+             f"1 m): ours {stats['ours_log_covered']}, Waymo's {stats['waymo_log_covered']}"]
+    for row in stats.get("per_scenario", []):
+        share = lambda v: "-" if v is None else f"{v:.3f}"  # noqa: E731
+        gap = "-" if row["gap"] is None else f"{row['gap']['mean_m']:.2f}/{row['gap']['max_m']:.2f} m"
+        lines.append(f"  {row['scenario_id']:<40} gap {gap}  log within 1 m: ours "
+                     f"{share(row['ours_log_within_1m'])}, Waymo's {share(row['waymo_log_within_1m'])}")
+    return "\n".join(lines)
+
+
 def _table(stats: dict) -> str:
     lines = [f"scenarios {stats['scenarios']}, on-route path {stats['with_on_route_path']}, "
              f"SDC covered (>=95% within 1 m) {stats['scenarios_with_95pct_within_1m']}, "
@@ -128,5 +240,11 @@ def _table(stats: dict) -> str:
 
 if __name__ == "__main__":
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    stats = path_quality(args[0], per_scenario="--per-scenario" in sys.argv)
-    print(json.dumps(stats, indent=1) if "--json" in sys.argv else _table(stats))
+    if not args:
+        sys.exit(__doc__.split("Usage: ")[-1])
+    per = "--per-scenario" in sys.argv
+    if "--compare-waymo" in sys.argv:
+        stats, table = compare_with_waymo(args[0], per_scenario=per), _compare_table
+    else:
+        stats, table = path_quality(args[0], per_scenario=per), _table
+    print(json.dumps(stats, indent=1) if "--json" in sys.argv else table(stats))
