@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from scenariomax.errors import InputError
-from scenariomax.io.skim import skim_scenario_id
+from scenariomax.io.skim import skim_scenario_id, skim_scenario_id_in
+from scenariomax.io.tfrecord import RecordError, file_compression, iter_records_with_spans
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes, load_schema
 from scenariomax.validate import (
@@ -296,6 +297,9 @@ def scenario_ids(files: list[Path]) -> Iterator[str]:
     a lookup, fast even for large shards. A file stops at its first damaged frame."""
     for file in files:
         try:
+            if file_compression(file) == "gzip":  # no bytes to skim in place: decompress each record once
+                yield from _gzip_scenario_ids(file)
+                continue
             with open(file, "rb") as stream:
                 fd, offset = stream.fileno(), 0
                 size = os.fstat(fd).st_size
@@ -307,6 +311,14 @@ def scenario_ids(files: list[Path]) -> Iterator[str]:
                     offset += 16 + length
         except OSError:
             continue
+
+
+def _gzip_scenario_ids(file: Path) -> Iterator[str]:
+    try:
+        for _, _, data in iter_records_with_spans(file):
+            yield skim_scenario_id_in(data)
+    except RecordError:
+        return  # the file stops at its first damaged record, as a plain one does
 
 
 def require_scenario(path: str | os.PathLike, files: list[Path], scenario_id: str) -> None:

@@ -34,7 +34,8 @@ from scenariomax._lifeline import exit_with_parent, watch_process
 from scenariomax.codec import encode_scenario
 from scenariomax.enrich.budget import fit_to_budget
 from scenariomax.errors import InputError, describe_os_error
-from scenariomax.io.tfrecord import TFRecordWriter, frame_record, iter_records
+from scenariomax.io.gzip_members import COMPRESSIONS
+from scenariomax.io.tfrecord import TFRecordWriter, frame_for, iter_records
 from scenariomax.locks import LOCK_FILE, FolderBusyError, FolderLock
 from scenariomax.manifest import (
     MANIFEST,
@@ -76,13 +77,14 @@ class ConvertSettings:
     progress: bool = True
     transform: Transform | None = None  # enrichment applied to every scenario before the budget fit
     transform_settings: dict = dataclasses.field(default_factory=dict)  # recorded in the manifest
+    compression: str = "none"  # "gzip": TFRecord GZIP shards, one gzip member per record (see scenariomax.io)
 
 
 @dataclasses.dataclass(frozen=True)
 class UnitResult:
     unit: str
-    records_path: str | None  # file of framed records (process engine)
-    records: tuple[bytes, ...] | None  # in-memory records (ray engine)
+    records_path: str | None  # file whose records are shard-ready frames (process engine)
+    records: tuple[bytes, ...] | None  # in-memory shard-ready frames (ray engine): `frame_for` of each record
     num_records: int
     failures: tuple[Failure, ...]
     peak_rss_mib: float = 0.0  # the worker's peak resident memory so far (reported in the manifest)
@@ -171,14 +173,15 @@ def _iter_unit_records(source: Source, unit: str, sizes: Sizes, transform: Trans
 
 
 def convert_unit_to_file(source: Source, unit: str, work_dir: str, sizes: Sizes,
-                         transform: Transform | None) -> UnitResult:
-    """Worker: converts one unit into a private record file (memory stays bounded)."""
+                         transform: Transform | None, compression: str = "none") -> UnitResult:
+    """Worker: converts one unit into a private record file (memory stays bounded). Each record there is the
+    bytes its shard will hold (compressed here, so compression runs in parallel in the workers)."""
     failures: list[Failure] = []
     notes: list[dict] = []
     temp, final = (Path(work_dir) / name for name in unit_work_files(unit))
     with TFRecordWriter(temp) as writer:
         for record in _iter_unit_records(source, unit, sizes, transform, failures, notes):
-            writer.write(record)
+            writer.write(frame_for(record, compression))
         count = writer.num_records
     os.replace(temp, final)
     return UnitResult(unit, str(final), None, count, tuple(failures), _peak_rss_mib(), tuple(notes))
@@ -191,11 +194,13 @@ def unit_work_files(unit: str) -> tuple[str, str]:
     return f"unit-{digest}.tmp", f"unit-{digest}.rec"
 
 
-def convert_unit_in_memory(source: Source, unit: str, sizes: Sizes, transform: Transform | None) -> UnitResult:
-    """Ray task body: records travel back through the object store (works across machines)."""
+def convert_unit_in_memory(source: Source, unit: str, sizes: Sizes, transform: Transform | None,
+                           compression: str = "none") -> UnitResult:
+    """Ray task body: shard-ready frames travel back through the object store (works across machines)."""
     failures: list[Failure] = []
     notes: list[dict] = []
-    records = tuple(_iter_unit_records(source, unit, sizes, transform, failures, notes))
+    records = tuple(frame_for(record, compression)
+                    for record in _iter_unit_records(source, unit, sizes, transform, failures, notes))
     return UnitResult(unit, None, records, len(records), tuple(failures), _peak_rss_mib(), tuple(notes))
 
 
@@ -220,6 +225,7 @@ def _run_settings(source: Source, settings: ConvertSettings) -> dict:
         "shard_size": settings.shard_size,
         "sizes": settings.sizes.as_dict(),
         "transform": settings.transform_settings,
+        "compression": settings.compression,
     }
 
 
@@ -236,8 +242,9 @@ class _OpenShard:
             self._stream.seek(keep_bytes)
         self.num_records = num_records
 
-    def write(self, data: bytes) -> None:
-        self._stream.write(frame_record(data))
+    def write(self, frame: bytes) -> None:
+        """Appends one record as `frame_for` made it (plain frame or gzip member: the shard's compression)."""
+        self._stream.write(frame)
         self.num_records += 1
 
     def checkpoint(self) -> int:
@@ -506,7 +513,8 @@ def _refuse_inputs_inside(out: Path, units: Sequence[str]) -> None:
 def _check_resumable(previous: dict, source: Source, settings: ConvertSettings, units: Sequence[str],
                      out: Path) -> None:
     path = out / MANIFEST
-    if previous.get("settings") != _run_settings(source, settings):
+    before = {"compression": "none", **(previous.get("settings") or {})}  # manifests older than compression
+    if before != _run_settings(source, settings):
         raise ConversionError(f"{path}: settings differ from that conversion's; rerun with the same options, "
                               "or use --overwrite or a new --out")
     done_before = previous.get("units") or {}
@@ -544,7 +552,7 @@ def _watch_main_process(main_pid: int) -> None:
 
 def _results_process(source: Source, units: Sequence[str], settings: ConvertSettings, work: Path,
                      workers: int) -> Iterator[UnitResult]:
-    tasks = [(source, unit, str(work), settings.sizes, settings.transform) for unit in units]
+    tasks = [(source, unit, str(work), settings.sizes, settings.transform, settings.compression) for unit in units]
     if workers <= 1 or len(tasks) <= 1:
         for task in tasks:
             yield _convert_unit_star(task)
@@ -587,7 +595,8 @@ def _results_ray(source: Source, units: Sequence[str], settings: ConvertSettings
     next_unit = 0
     while next_unit < len(units) or refs:
         while next_unit < len(units) and len(refs) < window:
-            refs.append(remote.remote(source, units[next_unit], settings.sizes, settings.transform))
+            refs.append(remote.remote(source, units[next_unit], settings.sizes, settings.transform,
+                                      settings.compression))
             next_unit += 1
         yield ray.get(refs.pop(0))  # in order, so shards are deterministic
 
@@ -621,6 +630,8 @@ def _check_settings(settings: ConvertSettings) -> None:
         raise ConversionError(f"--shard-size {settings.shard_size}: must be at least 1")
     if settings.workers is not None and settings.workers < 1:
         raise ConversionError(f"--workers {settings.workers}: must be at least 1 (leave it out for one per core)")
+    if settings.compression not in COMPRESSIONS:
+        raise ConversionError(f"--compression {settings.compression!r}: use one of {', '.join(COMPRESSIONS)}")
     if settings.resume and settings.overwrite:
         raise ConversionError("--resume and --overwrite exclude each other: continue the conversion, or replace it")
 

@@ -1,5 +1,8 @@
 """Reading and writing shard files: `read_shards` streams Scenarios, `write_shards` writes them.
 
+Shards may be plain or gzip-compressed TFRecord files (`compression="gzip"`); readers tell them apart by
+the gzip magic bytes, so nothing here needs to be told which.
+
 Shard files are named `<split>-<index>-of-<count>.tfrecord`, beside a `manifest.json` that lists each one
 with its record count and sha256 (see `scenariomax.manifest`). Readers check the manifest before streaming
 (state complete, every listed shard present, no unlisted shard file) and compare record counts as they
@@ -19,6 +22,7 @@ from typing import Any
 from scenariomax.codec import BudgetError, SchemaError, decode_scenario, encode_scenario
 from scenariomax.errors import InputError
 from scenariomax.io.example import ExampleError
+from scenariomax.io.gzip_members import COMPRESSIONS
 from scenariomax.io.tfrecord import RecordError, TFRecordWriter, iter_record_spans, iter_records, read_record_at
 from scenariomax.manifest import (
     COMPLETE,
@@ -205,7 +209,7 @@ def _finish_temp_shard(path: Path) -> dict:
 
 
 def _write_temp_shards(scenarios: Iterable[Scenario], out: Path, sizes: Sizes | None, shard_size: int,
-                       split: str) -> list[dict]:
+                       split: str, compression: str = "none") -> list[dict]:
     """Writes hidden temp shards; returns their manifest entries (without final names). Removes them on error."""
     entries: list[dict] = []
     writer: TFRecordWriter | None = None
@@ -216,7 +220,7 @@ def _write_temp_shards(scenarios: Iterable[Scenario], out: Path, sizes: Sizes | 
                     writer.close()
                     entries[-1].update(num_records=writer.num_records, **_finish_temp_shard(writer.path))
                 entries.append({"temp_file": f".{split}-{len(entries):05d}.tfrecord.tmp"})
-                writer = TFRecordWriter(out / entries[-1]["temp_file"])
+                writer = TFRecordWriter(out / entries[-1]["temp_file"], compression)
             try:
                 record = encode_scenario(scenario, sizes)
             except BudgetError as error:
@@ -235,13 +239,15 @@ def _write_temp_shards(scenarios: Iterable[Scenario], out: Path, sizes: Sizes | 
     return entries
 
 
-def _new_manifest(sizes: Sizes | None, shard_size: int, split: str, shards: list[dict]) -> dict:
+def _new_manifest(sizes: Sizes | None, shard_size: int, split: str, shards: list[dict],
+                  compression: str = "none") -> dict:
     schema = load_schema()
     num_records = sum(entry["num_records"] for entry in shards)
     return {
         "schema": {"name": schema.name, "version": schema.version},
         "source_dataset": WRITE_SHARDS,
-        "settings": {"split": split, "shard_size": shard_size, "sizes": sizes.as_dict() if sizes else None},
+        "settings": {"split": split, "shard_size": shard_size, "sizes": sizes.as_dict() if sizes else None,
+                     "compression": compression},
         "state": "finalizing",
         "counts": {"scenarios": num_records, "failures": 0},
         "shards": shards,
@@ -251,16 +257,20 @@ def _new_manifest(sizes: Sizes | None, shard_size: int, split: str, shards: list
 
 
 def write_shards(scenarios: Iterable[Scenario], out: str | os.PathLike, sizes: Sizes | None = None,
-                 shard_size: int = 1000, split: str = "train", overwrite: bool = False) -> list[Path]:
+                 shard_size: int = 1000, split: str = "train", overwrite: bool = False,
+                 compression: str = "none") -> list[Path]:
     """Writes scenarios to `out/<split>-XXXXX-of-YYYYY.tfrecord` plus `out/manifest.json` (sequential).
 
     `out` must be new or empty, or hold an earlier output of write_shards: an interrupted one is replaced,
     a complete one only with `overwrite=True`. Anything else there (another conversion, shards without a
     manifest, other files) raises ShardWriteError, touching nothing. Shards are written to hidden temp files
     and renamed once the manifest lists them, so a crash never leaves an output that reads as complete.
+    `compression="gzip"` writes TFRecord GZIP files (one gzip member per record; every reader detects it).
     Use `scenariomax.pipeline.convert` for parallel, resumable conversions.
     """
     out = Path(out)
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"compression {compression!r}: use one of {', '.join(COMPRESSIONS)}")
     previous = _claim_folder(out, overwrite)
     created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
@@ -268,7 +278,7 @@ def write_shards(scenarios: Iterable[Scenario], out: str | os.PathLike, sizes: S
         if _is_own_temp(entry.name):
             entry.unlink()  # leftovers of an interrupted write_shards
     try:
-        temps = _write_temp_shards(scenarios, out, sizes, shard_size, split)
+        temps = _write_temp_shards(scenarios, out, sizes, shard_size, split, compression)
     except BaseException:
         if created and not any(out.iterdir()):
             out.rmdir()  # a failed write leaves no empty folder of ours behind
@@ -278,7 +288,7 @@ def write_shards(scenarios: Iterable[Scenario], out: str | os.PathLike, sizes: S
         for name in sorted(_listed_names(previous)):
             (out / name).unlink(missing_ok=True)
     shards = [{"file": shard_name(split, index, len(temps)), **entry} for index, entry in enumerate(temps)]
-    manifest = _new_manifest(sizes, shard_size, split, shards)
+    manifest = _new_manifest(sizes, shard_size, split, shards, compression)
     write_manifest(out, manifest)
     for entry in shards:
         os.replace(out / entry.pop("temp_file"), out / entry["file"])

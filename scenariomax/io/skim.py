@@ -77,8 +77,19 @@ def _entry_id(entry: bytes) -> str:
 def skim_scenario_id(fd: int, offset: int, length: int) -> str:
     """`scenario/id` of the tf.Example at [offset, offset + length) of file descriptor `fd`, reading only
     the map entries' heads; "" when the record is not a tf.Example or has no id."""
+    return _skim(lambda size, at: os.pread(fd, size, at), offset, length)
+
+
+def skim_scenario_id_in(data: bytes) -> str:
+    """`skim_scenario_id` of a record already in memory (a decompressed gzip record)."""
+    view = memoryview(data)
+    return _skim(lambda size, at: bytes(view[at:at + size]), 0, len(data))
+
+
+def _skim(pread, offset: int, length: int) -> str:
+    """The walk of `skim_scenario_id`; `pread(size, at)` reads the record's bytes."""
     try:
-        head = os.pread(fd, min(32, length), offset)
+        head = pread(min(32, length), offset)
         tag, pos = _varint(head, 0)
         if tag != 0x0A:  # Example.features
             return ""
@@ -87,7 +98,7 @@ def skim_scenario_id(fd: int, offset: int, length: int) -> str:
         for _ in range(MAX_ENTRIES_SKIMMED):
             if cursor >= end:
                 return ""
-            peek = os.pread(fd, min(_PEEK, end - cursor), cursor)
+            peek = pread(min(_PEEK, end - cursor), cursor)
             tag, pos = _varint(peek, 0)
             if tag != 0x0A:  # not a map entry: skip an unknown field
                 cursor += _skip_field(tag & 7, peek, pos)
@@ -97,11 +108,11 @@ def skim_scenario_id(fd: int, offset: int, length: int) -> str:
             if key_tag == 0x0A:
                 key_length, kpos = _varint(peek, kpos)
                 if key_length == len(_ID_KEY) and peek[kpos:kpos + key_length] == _ID_KEY:
-                    return _entry_id(os.pread(fd, entry_length, cursor + pos))
+                    return _entry_id(pread(entry_length, cursor + pos))
             cursor += pos + entry_length
     except (ValueError, OSError, IndexError):
         return ""
     return ""
 
 
-__all__ = ["MAX_ENTRIES_SKIMMED", "skim_scenario_id"]
+__all__ = ["MAX_ENTRIES_SKIMMED", "skim_scenario_id", "skim_scenario_id_in"]

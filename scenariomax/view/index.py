@@ -5,6 +5,9 @@ tf.Example for `scenario/id` without reading or decoding the rest of the record:
 frame headers and the first bytes of each map entry, and jumps over the values (`scenariomax.io.skim`).
 A 1,000-scenario synthetic set (2.6 GB on disk) is indexed in a fraction of a second. Records are decoded
 (and validated, and CRC-checked) only when one is opened: `ShardIndex.check`.
+
+A gzip-compressed shard has no record bytes to skim in place: its records are decompressed once while
+indexing (~4 ms each for 2.5 MB records) and read back by gzip member (`scenariomax.io.tfrecord`).
 """
 
 from __future__ import annotations
@@ -17,8 +20,15 @@ from pathlib import Path
 
 from scenariomax.errors import InputError
 from scenariomax.inspect import summarize_scenario
-from scenariomax.io.skim import MAX_ENTRIES_SKIMMED, skim_scenario_id
-from scenariomax.io.tfrecord import RecordError, masked_crc32c, record_length
+from scenariomax.io.skim import MAX_ENTRIES_SKIMMED, skim_scenario_id, skim_scenario_id_in
+from scenariomax.io.tfrecord import (
+    RecordError,
+    file_compression,
+    iter_records_with_spans,
+    masked_crc32c,
+    read_record_at,
+    record_length,
+)
 from scenariomax.validate import RecordCheck, check_record, resolve_files
 
 _HEADER = struct.Struct("<QI")
@@ -29,13 +39,32 @@ SKIM_THREADS = 16
 class IndexEntry:
     file: int  # index into ShardIndex.files
     record: int  # record index within the file
-    offset: int  # byte offset of the record's payload
+    offset: int  # byte offset of the record's payload (gzip files: of its span, see `iter_record_spans`)
     length: int  # payload bytes
     scenario_id: str  # "" when the record holds none that the skim could find
+    compressed: bool = False  # read with `read_record_at` (a gzip file), not in place
+
+
+def _walk_gzip_file(path: Path, file_index: int) -> tuple[list[IndexEntry], str]:
+    """(entries, error message or "") for one gzip TFRecord file: each record decompressed once, for its id."""
+    entries: list[IndexEntry] = []
+    try:
+        for record, (offset, length, data) in enumerate(iter_records_with_spans(path)):
+            entries.append(IndexEntry(file_index, record, offset, length, skim_scenario_id_in(data), True))
+    except RecordError as error:
+        return entries, str(error)  # the records before the damage stay listed
+    except OSError as error:
+        return entries, f"{path}: cannot read ({error.strerror or error})"
+    return entries, ""
 
 
 def _walk_file(path: Path, file_index: int) -> tuple[list[IndexEntry], str]:
     """(entries, error message or "") for one TFRecord file, reading frame headers only."""
+    try:
+        if file_compression(path) == "gzip":
+            return _walk_gzip_file(path, file_index)
+    except OSError as error:
+        return [], f"{path}: cannot read ({error.strerror or error})"
     frames: list[tuple[int, int]] = []  # (payload offset, payload length)
     ids: list[str] = []
     error_text = ""
@@ -103,6 +132,8 @@ class ShardIndex:
         """The payload of record `position`, CRC-checked (RecordError-like ValueError with the place)."""
         entry = self.entries[position]
         file = self.files[entry.file]
+        if entry.compressed:
+            return read_record_at(file, entry.offset, entry.length, entry.record)  # RecordError is a ValueError
         with open(file, "rb") as stream:
             data = os.pread(stream.fileno(), entry.length + 4, entry.offset)
         if len(data) < entry.length + 4:

@@ -1,3 +1,4 @@
+import gzip
 import struct
 
 import numpy as np
@@ -88,10 +89,14 @@ def test_a_text_or_gzip_file_is_not_a_tfrecord_rather_than_a_crc_mismatch(tmp_pa
         list(iter_records(text))
     assert str(error.value) == f"{text}: not a TFRecord file (its first 12 bytes are not a record header)"
     assert error.value.path == str(text) and error.value.problem.startswith("not a TFRecord file")
-    gzipped = tmp_path / "shard.tfrecord.gz"
+    gzipped = tmp_path / "shard.tfrecord.gz"  # gzip is read (TFRecord GZIP); damaged gzip says so
     gzipped.write_bytes(b"\x1f\x8b\x08\x00" + bytes(40))
-    with pytest.raises(RecordError, match="gzip-compressed: decompress it first"):
+    with pytest.raises(RecordError, match="damaged gzip data|truncated gzip data"):
         list(iter_records(gzipped))
+    double = tmp_path / "twice.tfrecord.gz"
+    double.write_bytes(gzip.compress(gzip.compress(b"x" * 100)))
+    with pytest.raises(RecordError, match="is gzip-compressed twice"):
+        list(iter_records(double))
     tiny = tmp_path / "tiny.tfrecord"
     tiny.write_bytes(b"hi\n")
     with pytest.raises(RecordError, match=r"not a TFRecord file \(3 bytes, too short for a record header\)"):

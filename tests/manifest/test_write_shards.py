@@ -24,7 +24,7 @@ def test_the_manifest_lists_every_shard_with_count_size_and_sha256(tmp_path):
     assert (manifest["state"], manifest["source_dataset"], manifest["counts"]) == (
         "complete", "write_shards", {"scenarios": 5, "failures": 0})
     assert manifest["schema"] == {"name": "vmax-shard", "version": "1.0.0"}
-    assert manifest["settings"] == {"split": "train", "shard_size": 2, "sizes": SIZES.as_dict()}
+    assert manifest["settings"] == {"split": "train", "shard_size": 2, "sizes": SIZES.as_dict(), "compression": "none"}
     assert [entry["file"] for entry in manifest["shards"]] == [file.name for file in files]
     assert [entry["num_records"] for entry in manifest["shards"]] == [2, 2, 1]
     for entry, file in zip(manifest["shards"], files):
