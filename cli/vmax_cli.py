@@ -282,6 +282,86 @@ def view(target, policy, num_scenarios, data, num_objects, seed, out, quiet):
     click.echo(str(result.out))
 
 
+@main.command()
+@click.option("--policy", required=True,
+              help="Comma-separated: log, constant, idm, or training run directories (their latest checkpoint; the "
+                   "policy drives the SDC and every evaluated agent, sampling its actions).")
+@click.option("--data", default=None,
+              help="Shard directory, file or glob; 'synthetic' for the held-out synthetic split (seed 1, 100 scenes). "
+                   "Default for a run directory: its held-out split.")
+@click.option("--rollouts", type=click.IntRange(1), default=32, show_default=True,
+              help="Rollouts per scene (WOSAC: 32). A deterministic policy without --action-noise runs once and counts "
+                   "as this many identical rollouts.")
+@click.option("--scenes", type=click.IntRange(1), default=None, help="Score only the first K scenes.")
+@click.option("--max-agents", type=click.IntRange(1), default=32, show_default=True,
+              help="Controllable agents evaluated (and driven) besides the SDC, nearest first.")
+@click.option("--action-noise", type=click.FloatRange(0.0), default=0.0, show_default=True,
+              help="Standard deviation (m/s^2) of a noise added to every driven object's acceleration each step, so "
+                   "that a deterministic policy's rollouts differ.")
+@click.option("--num-objects", type=click.IntRange(1), default=64, show_default=True, help="Object slots loaded.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the rollouts' random keys.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summaries as JSON.")
+@click.option("--out", type=click.Path(dir_okay=False), default=None, help="Also write the summaries JSON here.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def realism(policy, data, rollouts, scenes, max_agents, action_noise, num_objects, seed, as_json, out, quiet):
+    """Sim-agent realism (WOSAC-style meta-metric): likelihood of the logged future under each feature's
+    histogram over N rollouts, weighted as the 2024 challenge (docs/realism.md)."""
+    from scenariomax.progress import Progress
+    from vmax_sim.data import DataConfig
+    from vmax_sim.evaluation.realism_rollouts import ROLLOUT_POLICIES
+    from vmax_sim.evaluation.realism_run import format_realism, realism_for_policy
+    from vmax_sim.evaluation.report import expected_num_scenarios
+
+    notes = lambda line: click.echo(line, err=True)  # noqa: E731  (stdout may carry --json)
+    try:
+        summaries = []
+        for entry in [part.strip() for part in policy.split(",") if part.strip()]:
+            if entry not in ROLLOUT_POLICIES and not Path(entry).is_dir():
+                raise InputError(f"--policy {entry!r}: neither one of {', '.join(ROLLOUT_POLICIES)} nor a training "
+                                 "run directory")
+            trained = _realism_run(entry, data, notes) if entry not in ROLLOUT_POLICIES else None
+            if trained is None and not data:
+                raise InputError(f"--policy {entry}: give --data (shards, or 'synthetic')")
+            data_config = trained.data_config if trained else DataConfig(
+                path=_realism_data(data, num_objects, notes), num_objects=num_objects)
+            total = expected_num_scenarios(data_config.path, scenes)
+            with Progress(f"realism {Path(entry).name}", total, "scenes", enabled=not quiet) as shown:
+                result = realism_for_policy(entry, data_config, trained=trained, num_rollouts=rollouts,
+                                            num_scenes=scenes, max_agents=max_agents, action_noise=action_noise,
+                                            seed=seed, progress=shown)
+            summaries.append({**result.summary, "data": data_config.path})
+    except (InputError, ValueError, OSError) as error:
+        _fail(one_line(error))
+    text = json.dumps(summaries if len(summaries) > 1 else summaries[0], indent=2)
+    click.echo(text if as_json else format_realism(summaries))
+    if out:
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+        Path(out).write_text(text)
+
+
+def _realism_data(data: str, num_objects: int, print_fn) -> str:
+    """A shard path, or the held-out synthetic split for 'synthetic'."""
+    if data != "synthetic":
+        return data
+    from vmax_sim.training.run import synthetic_split
+
+    return synthetic_split(100, 1, num_objects, print_fn)
+
+
+def _realism_run(run_dir: str, data: str | None, print_fn):
+    """A training run directory as realism's `TrainedRun` (its checkpoint, learner, configs and data sizes)."""
+    from vmax_sim.evaluation.realism_run import TrainedRun
+    from vmax_sim.training.run import components, data_config, resolve_eval_data
+    from vmax_sim.training.run_policy import load_trained_policy
+
+    loaded = load_trained_policy(run_dir)
+    env, learner = components(loaded.config)
+    path = _realism_data(data, loaded.config.data.num_objects, print_fn) if data else resolve_eval_data(
+        loaded.config, print_fn)
+    return TrainedRun(name=loaded.policy.name, learner=learner, params=loaded.params, env_config=env.env_config,
+                      obs_config=loaded.config.obs, data_config=data_config(loaded.config, path, batch_size=1))
+
+
 @main.group()
 def cache() -> None:
     """What V-Max keeps under $VMAX_CACHE_DIR (default ~/.cache/vmax_sim): the embedded synthetic splits and the

@@ -91,6 +91,47 @@ def summarise(per_scene: dict, config: RealismConfig) -> dict:
                                               "num_evaluated")}}
 
 
+@dataclasses.dataclass(frozen=True)
+class TrainedRun:
+    """What realism needs of a training run; training builds it (the CLI wires `vmax_sim.training` in), so this
+    floor never imports training."""
+
+    name: str
+    learner: object  # the run's Learner (its `act` samples the policy)
+    params: object  # the checkpoint's policy parameters
+    env_config: object  # the run's EnvConfig (normalised actions)
+    obs_config: object  # the run's ObservationConfig
+    data_config: DataConfig  # the run's data sizes, with the shards to score
+
+
+def realism_for_policy(policy: str, data_config: DataConfig | None = None, *, trained: TrainedRun | None = None,
+                       num_rollouts: int = 32, num_scenes: int | None = None, max_agents: int = DEFAULT_MAX_AGENTS,
+                       action_noise: float = 0.0, deterministic: bool = False, seed: int = 0,
+                       config: RealismConfig = RealismConfig(), progress=None) -> RealismResult:
+    """`evaluate_realism` of a named policy ("log", "constant", "idm", on `data_config`) or of a trained run
+    (`trained`, on its own data config)."""
+    from vmax_sim.env.config import EnvConfig
+    from vmax_sim.env.factory import make_environment
+    from vmax_sim.evaluation.realism_rollouts import named_rollout_fn, trained_rollout_fn
+    from vmax_sim.metrics import MetricsConfig
+
+    if num_rollouts < 1 or max_agents < 1 or action_noise < 0:
+        raise ValueError("rollouts and max agents must be at least 1 and the action noise not negative")
+    settings = {"action_noise": action_noise}
+    if trained is not None:
+        data_config = trained.data_config
+        env = make_environment(trained.env_config, MetricsConfig())
+        rollout_fn = trained_rollout_fn(trained.learner, trained.params, env, trained.obs_config, num_rollouts,
+                                        max_agents, deterministic=deterministic, action_noise=action_noise,
+                                        name=trained.name)
+        policy, settings["sampled"] = trained.name, not deterministic
+    else:
+        env = make_environment(EnvConfig(max_num_objects=data_config.num_objects), MetricsConfig())
+        rollout_fn = named_rollout_fn(policy, env, num_rollouts, max_agents, action_noise)
+    return evaluate_realism(rollout_fn, data_config, policy=policy, num_rollouts=num_rollouts, num_scenes=num_scenes,
+                            max_agents=max_agents, config=config, seed=seed, progress=progress, settings=settings)
+
+
 def _cell(value, fmt: str = ".4f") -> str:
     return "n/a" if value is None else format(value, fmt)
 
@@ -117,4 +158,5 @@ def format_realism(summaries: list[dict]) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["DEFAULT_MAX_AGENTS", "RealismResult", "evaluate_realism", "format_realism", "scene_key", "summarise"]
+__all__ = ["DEFAULT_MAX_AGENTS", "RealismResult", "TrainedRun", "evaluate_realism", "format_realism", "realism_for_policy",
+           "scene_key", "summarise"]
