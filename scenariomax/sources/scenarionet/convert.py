@@ -1,12 +1,17 @@
 """ScenarioNet / MetaDrive scenario description (a dict) -> `Scenario`s, one per 91-step window.
 
 Tracks are resampled to 10 Hz when the description's sample rate differs, then cut into windows
-(see `scenariomax.sources.womd.windows`); only windows where the SDC is valid at every step are
-kept. String ids are mapped to ints with a stable table (see `stable_int_ids`).
+(see `scenariomax.sources.womd.windows.log_window_starts`); windows where the SDC is valid at the
+current step are kept. A log shorter than a window gives one window whose steps past the log's end
+are invalid (noted in the manifest). String ids are mapped to ints with a stable table (see
+`stable_int_ids`).
 
-Descriptions from every MetaDrive / ScenarioNet generation are accepted: `metadata` may be empty
-or missing (the SDC and the time step are then derived, see `sdc_row` and `source_times`), and
-traffic lights may store their lane and stop point once or per step.
+Descriptions from every MetaDrive / ScenarioNet generation are accepted (docs/datasets.md lists the
+layouts): `metadata` may be empty, partial or missing (the SDC and the time step are then derived,
+see `named_sdc`, `derived_sdc` and `source_times`); a track's state may be a dict under "state", its
+fields on the track itself, or one (T, 10) array; box sizes may be one (T, 3) `size`; traffic lights
+may store their lane and stop point once or per step. Tracks that cannot be read are dropped and
+noted, not fatal (unless one is the SDC).
 """
 
 from __future__ import annotations
@@ -34,7 +39,7 @@ from scenariomax.schema import Sizes
 from scenariomax.sources.base import MANIFEST_NOTES
 from scenariomax.sources.sanity import STEP_SECONDS, is_nominal_10hz, swap_rows, wider_than_long
 from scenariomax.sources.womd.convert import ScenarioBuildError
-from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, window_starts, wrap_angle
+from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, log_window_starts, window_steps, wrap_angle
 
 SOURCE_NAME = "scenarionet"
 MPH_TO_MPS, KMH_TO_MPS = 0.44704, 1.0 / 3.6
@@ -65,6 +70,8 @@ MAP_TYPES = {
     "ROAD_EDGE_MEDIAN": sch.RG_ROAD_EDGE_MEDIAN, "ROAD_EDGE_SIDEWALK": sch.RG_ROAD_EDGE_BOUNDARY,
     "STOP_SIGN": sch.RG_STOP_SIGN, "CROSSWALK": sch.RG_CROSSWALK, "CROSS_WALK": sch.RG_CROSSWALK,
     "SPEED_BUMP": sch.RG_SPEED_BUMP, "DRIVEWAY": sch.RG_DRIVEWAY,
+    # MetaDrive's own names before the March 2023 Scenario Description (its "old format" files)
+    "center_lane": sch.RG_LANE_SURFACE_STREET, "stop_sign": sch.RG_STOP_SIGN, "cross_walk": sch.RG_CROSSWALK,
 }
 _CLOSED_TYPES = (sch.RG_CROSSWALK, sch.RG_SPEED_BUMP, sch.RG_DRIVEWAY)
 # MetaDrive light strings and WOMD lane-state strings -> WOMD light enum. Early MetaDrive stored the
@@ -214,21 +221,86 @@ def _interp(values: np.ndarray, plan) -> np.ndarray:
 
 
 # --- tracks ----------------------------------------------------------------------------------------
+# Columns of the single (T, 10) state array MetaDrive wrote in 2021-2022.
+STATE_COLUMNS = {"position": slice(0, 3), "length": 3, "width": 4, "height": 5, "heading": 6,
+                 "velocity": slice(7, 9), "valid": 9}
+HEADING_NAMES = ("heading", "heading_theta", "yaw")  # MetaDrive's object states call it heading_theta
+SIZE_NAMES = ("length", "width", "height")
+
+
+def _raw_state(track) -> Mapping | np.ndarray | None:
+    """The state as written: `track["state"]` (a dict, or the 2021-2022 array), or the track itself when
+    its fields sit on it (MetaDrive's March 2023 "old format": type, position, size... side by side)."""
+    if not isinstance(track, Mapping):
+        return None
+    state = track.get("state")
+    if isinstance(state, (Mapping, np.ndarray)):
+        return state
+    return track if "valid" in track else None
+
+
+def _split_size(size) -> dict[str, np.ndarray]:
+    """length / width / height from one `size`: (T, 3) per step, or (3,) for the whole track."""
+    size = np.asarray(size, np.float64)
+    if size.ndim == 1 and size.size == 3:
+        return {name: np.full(1, size[i]) for i, name in enumerate(SIZE_NAMES)}  # repeated by `_per_step`
+    size = size.reshape(len(size), -1)
+    if size.shape[1] < 3:
+        raise ValueError(f"size of shape {size.shape} (expected (T, 3))")
+    return {name: size[:, i] for i, name in enumerate(SIZE_NAMES)}
+
+
 def track_state(key, track) -> Mapping:
-    state = track.get("state") if isinstance(track, Mapping) else None
+    """One track's per-step fields under our names, whatever the writer's generation (see `_raw_state`):
+    position, heading, velocity, length, width, height, valid. ScenarioBuildError without `valid`."""
+    state = _raw_state(track)
+    if isinstance(state, np.ndarray):
+        if state.ndim != 2 or state.shape[1] < 10:
+            raise ScenarioBuildError(f"track {key}: state array of shape {state.shape} (expected (T, 10))")
+        return {name: state[:, column] for name, column in STATE_COLUMNS.items()}
     if not isinstance(state, Mapping) or "valid" not in state:
         raise ScenarioBuildError(f"track {key}: no state with 'valid'")
-    return state
+    if "heading" in state and all(name in state for name in SIZE_NAMES):
+        return state  # ScenarioNet's own layout: nothing to rename
+    out = dict(state)
+    heading = next((name for name in HEADING_NAMES if name in state), None)
+    if heading is not None:
+        out["heading"] = state[heading]
+    if not all(name in state for name in SIZE_NAMES) and "size" in state:
+        try:
+            out.update(_split_size(state["size"]))
+        except (ValueError, TypeError) as error:
+            raise ScenarioBuildError(f"track {key}: bad size ({error})") from None
+    return out
 
 
 def common_length(tracks: Mapping) -> int:
-    """Steps per track: the most common length of `state.valid` (ScenarioNet tracks share one)."""
-    lengths = collections.Counter(int(np.size(track_state(key, track)["valid"])) for key, track in tracks.items())
+    """Steps per track: the most common length of `valid` among readable tracks (ScenarioNet tracks share one)."""
+    lengths = collections.Counter()
+    for key, track in tracks.items():
+        try:
+            lengths[int(np.size(track_state(key, track)["valid"]))] += 1
+        except ScenarioBuildError:
+            continue  # dropped later, with the reason noted
     return lengths.most_common(1)[0][0] if lengths else 0
 
 
+def sdc_length(key, track) -> int:
+    """Steps of the named SDC's track: the log's length."""
+    try:
+        return int(np.size(track_state(key, track)["valid"]))
+    except ScenarioBuildError as error:
+        raise ScenarioBuildError(f"the SDC's {error}") from None
+
+
 def _per_step(state: Mapping, key: str, num_steps: int, width: int | None = None) -> np.ndarray:
+    if key not in state:
+        missing = "heading (nor heading_theta)" if key == "heading" else \
+            f"{key} (nor size)" if key in SIZE_NAMES else key
+        raise KeyError(f"no {missing}")
     value = np.asarray(state[key], np.float64)
+    if value.size == 1 and num_steps != 1:  # one value for the whole track
+        value = np.full(num_steps * (width or 1), float(value.ravel()[0]))
     if width is None:
         value = value.reshape(num_steps, -1)[:, 0] if value.size else np.zeros(num_steps)
         return value
@@ -238,21 +310,44 @@ def _per_step(state: Mapping, key: str, num_steps: int, width: int | None = None
     return value[:, :width]
 
 
-def track_arrays(tracks: Mapping, num_steps: int) -> dict[str, np.ndarray]:
-    """Source-rate arrays: position (N, T, 3), heading/length/width/height (N, T), velocity (N, T, 2), valid."""
+def track_row(key, track, num_steps: int) -> dict[str, np.ndarray]:
+    """One track's source-rate fields; ScenarioBuildError naming the track and the cause."""
+    state = track_state(key, track)
+    try:
+        row = {"position": _per_step(state, "position", num_steps, 3),
+               "velocity": _per_step(state, "velocity", num_steps, 2) if "velocity" in state
+               else np.zeros((num_steps, 2))}  # absent in some exports: the sanity pass derives it
+        for name in ("heading", "length", "width", "height", "valid"):
+            row[name] = _per_step(state, name, num_steps)
+    except KeyError as error:
+        raise ScenarioBuildError(f"track {key}: {error.args[0] if error.args else error}") from None
+    except (ValueError, TypeError) as error:
+        raise ScenarioBuildError(f"track {key}: bad state ({type(error).__name__}: {error})") from None
+    return row
+
+
+def track_arrays(tracks: Mapping, num_steps: int, keep=None) -> tuple[dict[str, np.ndarray], list, dict[str, str]]:
+    """Source-rate arrays of the readable tracks: position (N, T, 3), heading/length/width/height (N, T),
+    velocity (N, T, 2), valid; their keys; and {key: why} for the tracks dropped. A track that cannot be
+    read (another length, a missing field) is dropped, unless it is `keep` (the SDC): then it fails."""
     rows = {name: [] for name in ("position", "heading", "velocity", "length", "width", "height", "valid")}
+    keys, dropped = [], {}
     for key, track in tracks.items():
-        state = track_state(key, track)
         try:
-            rows["position"].append(_per_step(state, "position", num_steps, 3))
-            rows["velocity"].append(_per_step(state, "velocity", num_steps, 2))
-            for name in ("heading", "length", "width", "height", "valid"):
-                rows[name].append(_per_step(state, name, num_steps))
-        except (KeyError, ValueError, TypeError) as error:
-            raise ScenarioBuildError(f"track {key}: bad state ({type(error).__name__}: {error})") from None
+            row = track_row(key, track, num_steps)
+        except ScenarioBuildError as error:
+            if keep is not None and key == keep:
+                raise ScenarioBuildError(f"the SDC's {error}") from None
+            dropped[str(key)] = str(error).removeprefix(f"track {key}: ")
+            continue
+        keys.append(key)
+        for name, value in row.items():
+            rows[name].append(value)
     out = {name: np.stack(values) if values else np.zeros((0, num_steps)) for name, values in rows.items()}
+    if not keys:
+        out["position"], out["velocity"] = np.zeros((0, num_steps, 3)), np.zeros((0, num_steps, 2))
     out["valid"] = (out["valid"] > 0.5) & _finite_steps(out)
-    return out
+    return out, keys, dropped
 
 
 def finite32(values: np.ndarray) -> np.ndarray:
@@ -328,9 +423,23 @@ def roadgraph_samples(polyline: MapPolyline, spacing: float = DEFAULT_SPACING_M)
     return math.ceil(min(length, 1e15) / spacing) + 1
 
 
+def feature_type(feature: Mapping) -> int | None:
+    """Roadgraph type of one map feature, None when not part of the roadgraph. Besides the type names,
+    MetaDrive's converters before April 2023 wrote a crosswalk with no type but `sign: "cross_walk"`, and
+    a speed bump whose `type` is the bump itself (a reference cycle)."""
+    kind = feature.get("type")
+    if isinstance(kind, str):
+        return MAP_TYPES.get(kind)
+    if kind is feature and "polygon" in feature:
+        return sch.RG_SPEED_BUMP
+    if kind is None and feature.get("sign") == "cross_walk":
+        return sch.RG_CROSSWALK
+    return None
+
+
 def _feature_points(feature: Mapping, rg_type: int) -> np.ndarray:
     if rg_type == sch.RG_STOP_SIGN:
-        points = feature.get("position", feature.get("polyline", []))
+        points = feature.get("position", feature.get("pos", feature.get("polyline", [])))
     elif rg_type in _CLOSED_TYPES:
         points = feature.get("polygon", feature.get("polyline", []))
     else:
@@ -344,7 +453,7 @@ def map_polylines(features: Mapping, ids: Mapping) -> tuple[list[MapPolyline], l
     for key, feature in features.items():
         if not isinstance(feature, Mapping):
             continue
-        rg_type = MAP_TYPES.get(str(feature.get("type", "")))
+        rg_type = feature_type(feature)
         if rg_type is None:
             continue  # unknown feature kinds (e.g. drivable-area polygons) are not part of the roadgraph
         points = _feature_points(feature, rg_type)
@@ -355,8 +464,8 @@ def map_polylines(features: Mapping, ids: Mapping) -> tuple[list[MapPolyline], l
         polylines.append(MapPolyline(fid, rg_type, points, speed_limit=_speed_limit(feature) if is_lane else -1.0,
                                      closed=rg_type in _CLOSED_TYPES))
         if is_lane:
-            links.append(LaneLinks(fid, successors=_link_ids(feature.get("exit_lanes", []), ids),
-                                   predecessors=_link_ids(feature.get("entry_lanes", []), ids),
+            links.append(LaneLinks(fid, successors=_link_ids(feature.get("exit_lanes", feature.get("exit")), ids),
+                                   predecessors=_link_ids(feature.get("entry_lanes", feature.get("entry")), ids),
                                    left_neighbors=_link_ids(feature.get("left_neighbor", []), ids),
                                    right_neighbors=_link_ids(feature.get("right_neighbor", []), ids)))
     total = sum(roadgraph_samples(line) for line in polylines)
@@ -456,9 +565,9 @@ def light_arrays(lights: Mapping, ids: Mapping, num_steps: int, plan) -> dict[st
 
 
 # --- scenarios -------------------------------------------------------------------------------------
-def _window_field(values: np.ndarray, cut: slice, valid: np.ndarray) -> np.ndarray:
-    """One window of a per-step array, -1 where invalid. (N, T10) -> (N, 91) float32"""
-    return np.where(valid, values[:, cut], -1.0).astype(np.float32)
+def _window_field(values: np.ndarray, start: int, length: int, valid: np.ndarray) -> np.ndarray:
+    """One window of a per-step array, -1 where invalid or outside the log. (N, T10) -> (N, 91) float32"""
+    return np.where(valid, window_steps(values, start, length, -1.0), -1.0).astype(np.float32)
 
 
 def _object_labels(meta: Mapping, keys: list) -> dict:
@@ -484,17 +593,62 @@ def _object_labels(meta: Mapping, keys: list) -> dict:
     return dict(tracks_to_predict=to_predict, difficulty_level=difficulty, objects_of_interest=of_interest)
 
 
-def _window_times(times: np.ndarray | None, cut: slice, valid: np.ndarray) -> dict:
-    """Timestamps from the data when the source steps are the 10 Hz steps, else the schema default."""
+def _window_times(times: np.ndarray | None, start: int, length: int, valid: np.ndarray) -> dict:
+    """Timestamps from the data when the source steps are the 10 Hz steps, else the schema default.
+    Steps outside the log are extrapolated at 10 Hz from its nearest end."""
     if times is None:
         return {}
-    micros = np.round((times[cut] - times[cut.start]) * 1e6).astype(np.int64)
+    steps = np.arange(start, start + length)
+    inside = np.clip(steps, 0, len(times) - 1)
+    seconds = times[inside] + (steps - inside) * STEP_SECONDS
+    micros = np.round((seconds - seconds[0]) * 1e6).astype(np.int64)
     return dict(timestamp_micros=np.where(valid, micros[None, :], -1), tl_timestamp_micros=micros)
+
+
+def log_current_step(meta: Mapping, times: np.ndarray, plan, num_steps_10hz: int, default: int) -> tuple[int, dict]:
+    """The log's current step on the 10 Hz grid, and a note when the metadata's could not be used.
+    `current_time_index` counts source steps: resampled, it is the 10 Hz step nearest its time."""
+    given = meta.get("current_time_index")
+    if not _given(given):
+        return default, {}
+    try:
+        index = int(given)
+    except (TypeError, ValueError):
+        return default, {"current_time_index_ignored": f"{given!r} is not a step index"[:120]}
+    if not 0 <= index < len(times):
+        return default, {"current_time_index_ignored": f"{index} is outside the log's {len(times)} steps"}
+    if plan is not None:
+        index = min(int(round(times[index] / STEP_SECONDS)), num_steps_10hz - 1)
+    return index, {}
+
+
+def window_notes(start: int, num_steps_10hz: int, sizes: Sizes, current: int) -> dict:
+    """What a window left out or moved, for the manifest: steps before the log's start or after its end
+    (invalid; the episode ends where the SDC's log does), and a current step moved to fit the history."""
+    notes = {}
+    if start < 0:
+        notes["history_padded"] = -start
+    if start + sizes.num_timesteps > num_steps_10hz:
+        notes["steps_padded"] = start + sizes.num_timesteps - num_steps_10hz
+        notes["log_steps"] = num_steps_10hz
+    if start == 0 and current < sizes.num_past:  # the log's own current step has too little history
+        notes["current_step_moved"] = {"log": current, "window": start + sizes.num_past}
+    return notes
+
+
+def no_window_reason(sdc_key, sdc_valid: np.ndarray, starts: list[int], num_past: int) -> str:
+    """Why none of the windows `starts` can be simulated: the SDC is not valid at any window's current step."""
+    currents = [start + num_past for start in starts]
+    shown = ", ".join(str(c) for c in currents[:5]) + (", ..." if len(currents) > 5 else "")
+    valid_steps = np.flatnonzero(sdc_valid)
+    where = f"steps {valid_steps[0]}-{valid_steps[-1]}" if len(valid_steps) else "no step"
+    return (f"the SDC (track {sdc_key}) is not valid at the current step of any window (log step{'s' * (len(currents) > 1)} "
+            f"{shown}); it is valid on {len(valid_steps)} of {len(sdc_valid)} steps at 10 Hz ({where})")
 
 
 def description_windows(desc: Mapping, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE,
                         default_id: str = "unnamed") -> Iterator[Scenario | ScenarioBuildError]:
-    """Every 91-step window (SDC valid throughout) of one scenario description, fitted to the budget."""
+    """Every 91-step window (SDC valid at its current step) of one scenario description, fitted to the budget."""
     if not isinstance(desc, Mapping) or not isinstance(desc.get("tracks"), Mapping):
         yield ScenarioBuildError("not a ScenarioNet scenario description (no 'tracks' dict)")
         return
@@ -508,19 +662,19 @@ def description_windows(desc: Mapping, sizes: Sizes, stride: int = DEFAULT_WINDO
 def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iterator[Scenario]:
     meta = as_mapping(desc.get("metadata"))
     tracks = desc["tracks"]
-    keys = list(tracks)
-    if not keys or len(keys) > MAX_TRACKS:
-        raise ScenarioBuildError(f"{len(keys)} tracks (1 to {MAX_TRACKS} allowed)")
-    sdc_key = named_sdc(desc, keys)
-    num_steps = int(np.size(track_state(sdc_key, tracks[sdc_key])["valid"])) if sdc_key is not None \
-        else common_length(tracks)
-    check_cells(len(keys), num_steps, "tracks")
+    if not tracks or len(tracks) > MAX_TRACKS:
+        raise ScenarioBuildError(f"{len(tracks)} tracks (1 to {MAX_TRACKS} allowed)")
+    sdc_key = named_sdc(desc, list(tracks))
+    num_steps = sdc_length(sdc_key, tracks[sdc_key]) if sdc_key is not None else common_length(tracks)
+    check_cells(len(tracks), num_steps, "tracks")
     times = source_times(desc, num_steps)
     if not is_nominal_10hz(times):
-        check_cells(len(keys), grid_steps(times), "tracks (at 10 Hz)")
+        check_cells(len(tracks), grid_steps(times), "tracks (at 10 Hz)")
     plan = resample_indices(times)
-    source_arrays = track_arrays(tracks, num_steps)
-    object_types = np.array([OBJECT_TYPES.get(str(as_mapping(tracks[k]).get("type", "")), sch.OBJECT_TYPE_OTHER)
+    source_arrays, keys, dropped = track_arrays(tracks, num_steps, keep=sdc_key)
+    if not keys:
+        raise ScenarioBuildError(f"no readable track ({len(dropped)} dropped, e.g. {next(iter(dropped.items()))})")
+    object_types = np.array([OBJECT_TYPES.get(_type_name(as_mapping(tracks[k]).get("type")), sch.OBJECT_TYPE_OTHER)
                              for k in keys])
     sdc = keys.index(sdc_key) if sdc_key is not None else derived_sdc(
         keys, object_types, source_arrays["valid"], source_arrays["position"])
@@ -528,13 +682,19 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iter
     swapped = wider_than_long(arrays["length"], arrays["width"], object_types, arrays["valid"])
     arrays["length"], arrays["width"] = swap_rows(arrays["length"], arrays["width"], swapped)
     num_steps_10hz = arrays["valid"].shape[1]
-    given_current = meta.get("current_time_index")
-    current = int(given_current) if plan is None and _given(given_current) else sizes.num_past
-    all_starts = window_starts(num_steps_10hz, current, sizes.num_past, sizes.num_timesteps, stride)
-    starts = [s for s in all_starts if arrays["valid"][sdc, s:s + sizes.num_timesteps].all()]
+    if num_steps_10hz < 2:
+        raise ScenarioBuildError(f"{num_steps_10hz} step{'s' * (num_steps_10hz != 1)} at 10 Hz: nothing follows "
+                                 f"the current step to simulate")
+    current, file_notes = log_current_step(meta, times, plan, num_steps_10hz, sizes.num_past)
+    current = min(current, num_steps_10hz - 2)  # a short log without metadata: one step follows it at least
+    all_starts = log_window_starts(num_steps_10hz, current, sizes.num_past, sizes.num_timesteps, stride)
+    starts = [s for s in all_starts if arrays["valid"][sdc, s + sizes.num_past]]
     if not starts:
-        raise ScenarioBuildError(f"no {sizes.num_timesteps}-step window at 10 Hz with the SDC valid throughout "
-                                 f"({num_steps_10hz} steps)")
+        raise ScenarioBuildError(no_window_reason(keys[sdc], arrays["valid"][sdc], all_starts, sizes.num_past))
+    if dropped:
+        file_notes["tracks_dropped"] = dict(list(dropped.items())[:20])  # unreadable tracks (first 20)
+    if swapped.any():
+        file_notes["boxes_swapped"] = [str(keys[i]) for i in np.flatnonzero(swapped)]
     key_ids = stable_int_ids(keys)
     object_ids = np.array([key_ids[k] for k in keys], np.int64)
     is_sdc = np.arange(len(keys)) == sdc
@@ -545,13 +705,15 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iter
     roadgraph = polylines_to_roadgraph(polylines)
     lane_graph = lane_graph_arrays(links, sizes.num_lane_links)
     lights = light_arrays(as_mapping(desc.get("dynamic_map_states")), map_ids, num_steps, plan)
+    fills = dict(tl_state=0, tl_valid=False, tl_lane_id=-1, tl_x=-1.0, tl_y=-1.0, tl_z=-1.0)
+    length = sizes.num_timesteps
     for start in starts:
-        cut = slice(start, start + sizes.num_timesteps)
-        valid = arrays["valid"][:, cut]
-        field = functools.partial(_window_field, cut=cut, valid=valid)
+        valid = window_steps(arrays["valid"], start, length, False)
+        field = functools.partial(_window_field, start=start, length=length, valid=valid)
         position, velocity = arrays["position"], arrays["velocity"]
         window_labels = labels if start + sizes.num_past == current else {
             name: np.zeros_like(value) for name, value in labels.items()}
+        notes = {**file_notes, **window_notes(start, num_steps_10hz, sizes, current)}
         scenario = Scenario(
             scenario_id=scenario_id if len(all_starts) == 1 else f"{scenario_id}_t{start:03d}",
             object_id=object_ids, object_type=object_types, is_sdc=is_sdc, valid=valid,
@@ -559,13 +721,16 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iter
             bbox_yaw=field(wrap_angle(arrays["heading"])), length=field(arrays["length"]),
             width=field(arrays["width"]), height=field(arrays["height"]),
             velocity_x=field(velocity[..., 0]), velocity_y=field(velocity[..., 1]),
-            **_window_times(times if plan is None else None, cut, valid),
+            **_window_times(times if plan is None else None, start, length, valid),
             **window_labels, **roadgraph, **lane_graph,
-            **{name: value[:, cut] for name, value in lights.items()},
+            **{name: window_steps(value, start, length, fills[name]) for name, value in lights.items()},
             source_dataset=SOURCE_NAME, current_time_index=sizes.num_past,
             metadata={"dataset": str(meta.get("dataset", "")), "log_start_step": start,
-                      "sdc_derived": sdc_key is None,
-                      **({MANIFEST_NOTES: {"boxes_swapped": [str(keys[i]) for i in np.flatnonzero(swapped)]}}
-                         if swapped.any() else {})},
+                      "sdc_derived": sdc_key is None, **({MANIFEST_NOTES: notes} if notes else {})},
         )
         yield fit_to_budget(scenario, sizes)
+
+
+def _type_name(value) -> str:
+    """A track's type name; anything but a string (an old writer's enum, a nested dict) is unknown."""
+    return value if isinstance(value, str) else ""

@@ -83,6 +83,8 @@ ALLOWED_GLOBALS: dict[tuple[str, str], str] = {
        for name in ("set", "frozenset", "complex", "slice", "bytearray")},
     **{(module, name): "defaultdict factory only" for module in ("builtins", "__builtin__")
        for name in ("list", "dict", "int", "float", "str", "tuple")},
+    ("metadrive.scenario.scenario_description", "ScenarioDescription"):
+        "a dict subclass (MetaDrive, March 2023): NEWOBJ with no arguments builds a plain dict",
     ("__builtin__", "long"): "defaultdict factory only (Python 3's int in protocol <= 2)",
     ("__builtin__", "unicode"): "defaultdict factory only (Python 3's str in protocol <= 2)",
 }
@@ -111,6 +113,22 @@ class _Builtin:
 
 
 _NDARRAY = _Builtin("numpy.ndarray", np.ndarray)  # only ever an argument of _reconstruct
+
+
+class _DictClass:
+    """Stand-in for a writer's dict subclass: NEWOBJ of it with no arguments gives a plain dict (its
+    items follow as SETITEMS), and it cannot be called or used any other way."""
+
+    __slots__ = ("name",)
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def __repr__(self) -> str:
+        return f"<dict class {self.name}>"
+
+
+_DICT_CLASSES = {("metadrive.scenario.scenario_description", "ScenarioDescription")}
 
 
 def _sized(value, what: str) -> int:
@@ -237,6 +255,7 @@ def _checked_globals(charge: _Charges, unbuilt: dict[int, object]) -> dict[tuple
         for name, type_ in types.items():
             out[(module, name)] = _Builtin(name, type_, calls.get(name))
     out[("__builtin__", "long")], out[("__builtin__", "unicode")] = _Builtin("long", int), _Builtin("unicode", str)
+    out.update({key: _DictClass(".".join(key)) for key in _DICT_CLASSES})
     assert set(out) == set(ALLOWED_GLOBALS)
     return out
 
@@ -262,8 +281,9 @@ def _dtype_state(dtype: np.dtype, state) -> tuple:
     return dtype.newbyteorder(state[1]).__reduce__()[2]
 
 
-# Opcodes a ScenarioNet pickle never needs: they build class instances or fetch external objects.
-_FORBIDDEN_OPCODES = {pickle.NEWOBJ: "NEWOBJ", pickle.NEWOBJ_EX: "NEWOBJ_EX", pickle.INST: "INST", pickle.OBJ: "OBJ",
+# Opcodes a ScenarioNet pickle never needs: they build class instances or fetch external objects
+# (NEWOBJ is handled apart: allowed for the `_DictClass` stand-ins only).
+_FORBIDDEN_OPCODES = {pickle.NEWOBJ_EX: "NEWOBJ_EX", pickle.INST: "INST", pickle.OBJ: "OBJ",
                       pickle.EXT1: "EXT1", pickle.EXT2: "EXT2", pickle.EXT4: "EXT4", pickle.PERSID: "PERSID",
                       pickle.BINPERSID: "BINPERSID"}
 
@@ -319,6 +339,17 @@ class RestrictedUnpickler(pickle._Unpickler):
             self.stack.pop()
             inst.__setstate__(_dtype_state(inst, state))
 
+    def load_newobj(self):
+        """NEWOBJ builds only a plain dict, for a writer's dict subclass (`_DictClass`) and no arguments."""
+        if len(self.stack) < 2:
+            raise pickle.UnpicklingError("NEWOBJ on an empty stack")
+        args, cls = self.stack[-1], self.stack[-2]
+        if not isinstance(cls, _DictClass) or args != ():
+            raise RefusedGlobalError("refused pickle opcode NEWOBJ (only plain containers and numpy arrays are "
+                                     "allowed)")
+        del self.stack[-2:]
+        self.append({})
+
     def load_bytearray8(self):
         """The stock version allocates the announced length before reading: a corrupt length would
         be a many-gigabyte allocation from 9 bytes."""
@@ -334,6 +365,7 @@ class RestrictedUnpickler(pickle._Unpickler):
 
 RestrictedUnpickler.dispatch[pickle.BUILD[0]] = _counted(RestrictedUnpickler.load_build)
 RestrictedUnpickler.dispatch[pickle.BYTEARRAY8[0]] = _counted(RestrictedUnpickler.load_bytearray8)
+RestrictedUnpickler.dispatch[pickle.NEWOBJ[0]] = _counted(RestrictedUnpickler.load_newobj)
 RestrictedUnpickler.dispatch.update({op[0]: _forbidden(name) for op, name in _FORBIDDEN_OPCODES.items()})
 
 
@@ -366,7 +398,8 @@ def _own_bytes(value) -> int:
 
 def expanded_size(root, limits: PickleLimits = SCENARIO_LIMITS) -> tuple[int, int]:
     """(values, payload bytes) of `root` with every shared reference counted again, in time linear
-    in the number of distinct containers (each subtree is measured once and memoised)."""
+    in the number of distinct containers (each subtree is measured once and memoised). A reference
+    cycle is legitimate (writers made them) and its back-reference counts as one value."""
     measured: dict[int, tuple[int, int]] = {}  # id of a container -> its expanded size
     open_ids: set[int] = set()  # containers on the current path: meeting one again is a cycle
     stack: list[tuple] = [(root, 0, None)]  # (value, depth, its children once opened)
@@ -390,7 +423,9 @@ def expanded_size(root, limits: PickleLimits = SCENARIO_LIMITS) -> tuple[int, in
         if children is None:  # only the root can be a leaf here
             return 1, _own_bytes(value)
         if id(value) in open_ids:
-            raise PickleLimitError("contains itself (a reference cycle)")
+            # A reference back to a container being measured (MetaDrive's old converters wrote a speed
+            # bump whose "type" is the bump itself): counted once, as its parent counts an unmeasured child.
+            continue
         if limits.max_depth is not None and depth > limits.max_depth:
             raise PickleLimitError(f"is nested more than {limits.max_depth} levels deep")
         open_ids.add(id(value))

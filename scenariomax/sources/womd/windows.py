@@ -9,6 +9,8 @@ window; a 199-step `training_20s` file gives windows starting at 0 and 80 (curre
 
 from __future__ import annotations
 
+import numpy as np
+
 from scenariomax.enrich.geometry import wrap_angle  # noqa: F401 (shared; re-exported)
 
 DEFAULT_WINDOW_STRIDE = 80
@@ -21,3 +23,33 @@ def window_starts(num_steps: int, current_time_index: int, num_past: int = 10, n
     if first < 0 or stride <= 0:
         return []
     return list(range(first, num_steps - num_timesteps + 1, stride))
+
+
+def log_window_starts(num_steps: int, current_time_index: int, num_past: int = 10, num_timesteps: int = 91,
+                      stride: int = DEFAULT_WINDOW_STRIDE) -> list[int]:
+    """First log step of every window of a log whose current step (`current_time_index`) lies in it.
+
+    Unlike `window_starts`, every log with a current step gives at least one window:
+    - too little history before the current step (ScenarioNet's 20 s WOMD databases say 0): the first
+      window starts at log step 0, so its current step is the first one whose history fits;
+    - too few steps for a full window (UniTraj's 81-step nuScenes windows): one window, its steps after
+      the log's end invalid (the episode ends where the log does);
+    - a log shorter than the history itself: one window starting before the log (negative start), the
+      missing history invalid, its current step on the log's.
+    """
+    if not 0 <= current_time_index < num_steps or stride <= 0:
+        return []
+    first = current_time_index - num_past
+    if first < 0 and num_steps > num_past + 1:
+        first = 0  # move the current step forward until the history fits; a future still follows it
+    return list(range(first, num_steps - num_timesteps + 1, stride)) or [first]
+
+
+def window_steps(values: np.ndarray, start: int, length: int, fill) -> np.ndarray:
+    """Steps [start, start + length) of (N, T, ...) `values`, `fill` where the window leaves the log
+    (before its first step when `start` < 0, after its last)."""
+    out = np.full((values.shape[0], length) + values.shape[2:], fill, dtype=values.dtype)
+    lo, hi = max(start, 0), min(start + length, values.shape[1])
+    if hi > lo:
+        out[:, lo - start:hi - start] = values[:, lo:hi]
+    return out

@@ -7,7 +7,7 @@ import pytest
 
 from scenariomax import schema as sch
 from scenariomax.scenario import Scenario
-from scenariomax.sources.base import Failure
+from scenariomax.sources.base import MANIFEST_NOTES, Failure
 from scenariomax.sources.scenarionet import ScenarioNetSource, resample_indices
 from scenariomax.sources.scenarionet import convert as sn_convert
 from tests.sources.scenarionet.fixtures import build_description, early_metadrive_description, write_pickle
@@ -146,9 +146,12 @@ def test_malformed_parts_are_ignored_or_fail_cleanly(tmp_path):
     desc["dynamic_map_states"] = [[{}]]  # an early MetaDrive placeholder
     desc["map_features"]["junk"] = "not a feature"
     only_scenario(convert(tmp_path, desc))
-    desc["tracks"]["cone"] = "not a track"
-    (item,) = convert(tmp_path, desc, name="sd_bad.pkl")
-    assert isinstance(item, Failure) and "track cone" in item.reason
+    desc["tracks"]["cone"] = "not a track"  # dropped and noted; the scenario still converts
+    scenario = only_scenario(convert(tmp_path, desc, name="sd_bad.pkl"))
+    assert scenario.metadata[MANIFEST_NOTES]["tracks_dropped"] == {"cone": "no state with 'valid'"}
+    desc["tracks"]["ego"] = "not a track"  # the SDC itself: nothing to simulate
+    (item,) = convert(tmp_path, desc, name="sd_bad2.pkl")
+    assert isinstance(item, Failure) and "the SDC's track ego: no state" in item.reason
 
 
 def test_non_finite_track_values_make_the_step_invalid(tmp_path):

@@ -90,13 +90,13 @@ def test_20s_at_10hz_gives_two_windows(tmp_path):
     assert not items[1].tracks_to_predict.any() and items[0].tracks_to_predict.any()
 
 
-def test_windows_need_the_sdc_valid_throughout(tmp_path):
+def test_windows_need_the_sdc_valid_at_their_current_step(tmp_path):
     desc = build_description(num_steps=201, step_seconds=0.1, scenario_id="gap")
-    desc["tracks"]["ego"]["state"]["valid"][50] = 0.0  # breaks the first window only
-    assert [s.scenario_id for s in convert(write_pickle(tmp_path / "sd_gap.pkl", desc))] == ["gap_t080"]
-    short = build_description(num_steps=20, step_seconds=0.1, scenario_id="short")
-    items = convert(write_pickle(tmp_path / "sd_short.pkl", short))
-    assert len(items) == 1 and isinstance(items[0], Failure) and "no 91-step window" in items[0].reason
+    desc["tracks"]["ego"]["state"]["valid"][10] = 0.0  # the first window's current step only
+    desc["tracks"]["ego"]["state"]["valid"][120] = 0.0  # inside the second window: kept, that step invalid
+    items = convert(write_pickle(tmp_path / "sd_gap.pkl", desc))
+    assert [s.scenario_id for s in items] == ["gap_t080"]
+    assert not items[0].valid[0, 40] and items[0].valid[0].sum() == 90
 
 
 def test_bad_description_fails_cleanly(tmp_path):
