@@ -7,7 +7,10 @@ kinematic_infeasibility or wrong_way > 0.5, comfort < 0.5, driving_direction < 1
 counted over judged episodes only (one whose SDC log ends at the start step has no scored step). Every
 failed episode is drawn (PNG + GIF) into <out>/<group>/, with an index.html per group.
 
-Usage: python benchmarks/expert_replay.py [--realdata PATH] [--out DIR] [--only GROUP,GROUP]
+The line under the table is the issue's bar: the share of judged real-WOMD episodes (the groups recorded in
+WOMD, whatever the file format) that are clean, i.e. accurate (no overlap, off-road or red light); >= 98%.
+
+Usage: python benchmarks/expert_replay.py [--realdata PATH] [--out DIR] [--only GROUP,GROUP] [--num-objects N]
 Writes <out>/expert_replay.md and <out>/expert_replay.json (default out: runs/expert_replay).
 """
 
@@ -32,6 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_REALDATA = ROOT.parent / "shared" / "realdata"
 DEFAULT_OUT = ROOT / "runs" / "expert_replay"
 NUM_OBJECTS = 128  # what `scenariomax convert` writes by default: the replay sees every logged object
+CLEAN_BAR = 0.98  # issue 24: the logged expert is clean on >= 98% of real WOMD scenes
 POLICY = "expert"
 
 
@@ -40,18 +44,19 @@ class Group:
     name: str
     dataset: str  # `scenariomax convert --dataset`
     src: str  # relative to the real-data folder
+    womd: bool = False  # recorded in WOMD (counted in the real-WOMD clean share)
 
 
 GROUPS = (
-    Group("womd-example", "womd", "womd/motion_data_one_example.tfrecord"),
-    Group("womd-scenario", "womd", "womd/motion_data_one_scenario.tfrecord"),
+    Group("womd-example", "womd", "womd/motion_data_one_example.tfrecord", womd=True),
+    Group("womd-scenario", "womd", "womd/motion_data_one_scenario.tfrecord", womd=True),
     Group("av2", "av2", "av2"),
     Group("scenarionet-nuscenes", "scenarionet", "scenarionet/nuscenes"),
-    Group("scenarionet-womd_20s", "scenarionet", "scenarionet/womd_20s"),
-    Group("scenarionet-womd_91steps", "scenarionet", "scenarionet/womd_91steps"),
+    Group("scenarionet-womd_20s", "scenarionet", "scenarionet/womd_20s", womd=True),
+    Group("scenarionet-womd_91steps", "scenarionet", "scenarionet/womd_91steps", womd=True),
     Group("scenarionet-sample", "scenarionet", "scenarionet/sd_nuscenes_v1.0-mini_scene-0553.pkl"),
-    Group("gpudrive", "gpudrive", "gpudrive"),
-    Group("nocturne", "gpudrive", "nocturne/example_scenario.json"),
+    Group("gpudrive", "gpudrive", "gpudrive", womd=True),
+    Group("nocturne", "gpudrive", "nocturne/example_scenario.json", womd=True),
 )
 
 # (episode metric, column title, words for people, fails(value)); wrong_way only where the metrics have it
@@ -142,14 +147,14 @@ def _add_failures(capture, rollout, index: int, metrics: Sequence[str]) -> None:
 
 # --- one group -------------------------------------------------------------------------------------
 
-def convert_group(group: Group, realdata: Path, out: Path) -> tuple[int, list[dict]]:
-    """Converts a group as `scenariomax convert` does (default sizes, enrichment on). -> (scenarios, failures)."""
+def convert_group(group: Group, realdata: Path, out: Path, num_objects: int = NUM_OBJECTS) -> tuple[int, list[dict]]:
+    """Converts a group as `scenariomax convert --num-objects N` does (enrichment on). -> (scenarios, failures)."""
     from scenariomax.enrich.transform import make_transform
     from scenariomax.pipeline import ConvertSettings, convert
     from scenariomax.schema import Sizes
     from scenariomax.sources.registry import make_source
 
-    source = make_source(group.dataset, src=str(realdata / group.src), sizes=Sizes())
+    source = make_source(group.dataset, src=str(realdata / group.src), sizes=Sizes(num_objects=num_objects))
     transform, transform_settings = make_transform()
     # one worker: in-process, no pool to start for a handful of files
     result = convert(source, ConvertSettings(out=out, workers=1, progress=False, transform=transform,
@@ -157,12 +162,13 @@ def convert_group(group: Group, realdata: Path, out: Path) -> tuple[int, list[di
     return result.num_scenarios, list(result.failures)
 
 
-def evaluate_group(shards: Path, gallery_dir: Path, group: Group, batch_size: int, max_pictures: int) -> dict:
+def evaluate_group(shards: Path, gallery_dir: Path, group: Group, batch_size: int, max_pictures: int,
+                   num_objects: int = NUM_OBJECTS) -> dict:
     """The expert on one group's shards: its row of the table, failures and pictures."""
     from vmax_sim.evaluation.report import compare_policies
 
     collector = ReplayCollector(max_pictures)
-    (run,) = compare_policies([POLICY], str(shards), num_objects=NUM_OBJECTS, batch_size=batch_size,
+    (run,) = compare_policies([POLICY], str(shards), num_objects=num_objects, batch_size=batch_size,
                               progress=False, print_fn=lambda line: None, on_batch=collector)
     collector.write(gallery_dir, [run], progress=False, title=f"Expert replay: {group.name}",
                     note=f"{group.dataset} data from {group.src}; every episode failing a replay check is drawn")
@@ -202,20 +208,22 @@ def _mean(values: np.ndarray) -> float | None:
     return float(np.mean(values)) if values.size else None
 
 
-def replay_group(group: Group, realdata: Path, out: Path, batch_size: int, max_pictures: int) -> dict:
+def replay_group(group: Group, realdata: Path, out: Path, batch_size: int, max_pictures: int,
+                 num_objects: int = NUM_OBJECTS) -> dict:
     """Converts then evaluates one group; a group that does not convert gets its one-line error instead."""
     from scenariomax.errors import InputError
     from scenariomax.pipeline import ConversionError
 
     start = time.perf_counter()
-    row: dict = {"group": group.name, "dataset": group.dataset, "src": str(realdata / group.src)}
+    row: dict = {"group": group.name, "dataset": group.dataset, "src": str(realdata / group.src), "womd": group.womd}
     with tempfile.TemporaryDirectory(prefix=f"expert-replay-{group.name}-") as tmp:
         try:
-            num, failures = convert_group(group, realdata, Path(tmp) / "shards")
+            num, failures = convert_group(group, realdata, Path(tmp) / "shards", num_objects)
             row["conversion_failures"] = [f"{f['unit']} [{f['scenario']}]: {f['reason']}" for f in failures]
             if num == 0:
                 raise InputError("no scenario converted")
-            row.update(evaluate_group(Path(tmp) / "shards", out / group.name, group, batch_size, max_pictures))
+            row.update(evaluate_group(Path(tmp) / "shards", out / group.name, group, batch_size, max_pictures,
+                                      num_objects))
         except (ConversionError, InputError) as error:
             row["error"] = str(error).splitlines()[0] if str(error) else type(error).__name__
     row["seconds"] = time.perf_counter() - start
@@ -237,6 +245,24 @@ def total_row(rows: Sequence[dict]) -> dict:
             "seconds": sum(row["seconds"] for row in rows)}
 
 
+def womd_clean(rows: Sequence[dict]) -> dict | None:
+    """Judged and clean (accurate) episodes over the real-WOMD groups, and the share; None without any."""
+    done = [row for row in rows if row.get("womd") and "error" not in row]
+    judged = sum(row["judged"] for row in done)
+    if not judged:
+        return None
+    clean = round(sum(row["sums"]["accurate"] for row in done))
+    return {"judged": judged, "clean": clean, "share": clean / judged, "meets_bar": clean / judged >= CLEAN_BAR}
+
+
+def format_womd_clean(summary: dict | None) -> str:
+    if summary is None:
+        return "Real WOMD: no judged episode."
+    verdict = "meets" if summary["meets_bar"] else "below"
+    return (f"Real WOMD: {summary['clean']} of {summary['judged']} judged episodes clean (no overlap, off-road or "
+            f"red light): {100 * summary['share']:.1f}% ({verdict} the {100 * CLEAN_BAR:.0f}% bar).")
+
+
 def _cell(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.3f}"
 
@@ -256,7 +282,7 @@ def format_table(rows: Sequence[dict], total: dict) -> str:
         cells += [str(row["failures"].get(key, "n/a")) for key, _ in columns]
         cells.append(str(len(row["failed_episodes"])))
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "Failure counts are judged episodes with: overlap, offroad, red_light, kinematic_infeasibility or "
+    lines += ["", format_womd_clean(womd_clean(rows)), "", "Failure counts are judged episodes with: overlap, offroad, red_light, kinematic_infeasibility or "
               "wrong_way > 0.5; comfort < 0.5; driving_direction < 1 (0.5: 2-6 m against the lane within 1 s, "
               "0: 6 m or more); making_progress < 0.5.", ""]
     lines += format_failures(rows)
@@ -283,7 +309,7 @@ def format_failures(rows: Sequence[dict]) -> list[str]:
 def write_outputs(out: Path, rows: Sequence[dict], total: dict, table: str, settings: dict) -> None:
     (out / "expert_replay.md").write_text(table + "\n")
     clean = [{k: v for k, v in row.items() if k != "sums"} for row in [*rows, total]]
-    data = {"settings": settings, "groups": clean[:-1], "total": clean[-1]}
+    data = {"settings": settings, "groups": clean[:-1], "total": clean[-1], "real_womd": womd_clean(rows)}
     (out / "expert_replay.json").write_text(json.dumps(data, indent=1) + "\n")
 
 
@@ -296,6 +322,8 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--only", default=None, help="comma-separated groups: " + ", ".join(g.name for g in GROUPS))
     parser.add_argument("--batch-size", type=int, default=8)
     parser.add_argument("--max-pictures", type=int, default=50, help="failed episodes drawn per group")
+    parser.add_argument("--num-objects", type=int, default=NUM_OBJECTS,
+                        help=f"object slots, as `scenariomax convert --num-objects` (default {NUM_OBJECTS})")
     return parser.parse_args(argv)
 
 
@@ -333,8 +361,8 @@ def run(argv: Sequence[str] | None = None, print_fn: Callable[[str], None] = pri
             print_fn(f"no real data at {realdata} (the shared folder is absent): nothing to replay")
             return 0
         raise ReplayError(f"--realdata {realdata}: {'not a folder' if realdata.exists() else 'no such folder'}")
-    if args.batch_size < 1 or args.max_pictures < 0:
-        raise ReplayError("--batch-size must be at least 1 and --max-pictures at least 0")
+    if args.batch_size < 1 or args.max_pictures < 0 or args.num_objects < 1:
+        raise ReplayError("--batch-size and --num-objects must be at least 1 and --max-pictures at least 0")
     groups = _groups(args.only)
     out = _out_dir(args.out)
     start = time.perf_counter()
@@ -343,14 +371,14 @@ def run(argv: Sequence[str] | None = None, print_fn: Callable[[str], None] = pri
         if not (realdata / group.src).exists():
             print(f"[{number}/{len(groups)}] {group.name}: skipped, {realdata / group.src} not found", file=sys.stderr)
             continue
-        rows.append(replay_group(group, realdata, out, args.batch_size, args.max_pictures))
+        rows.append(replay_group(group, realdata, out, args.batch_size, args.max_pictures, args.num_objects))
         print(f"[{number}/{len(groups)}] {group.name}: {_progress_note(rows[-1])}", file=sys.stderr, flush=True)
     if not rows:
         raise ReplayError(f"--realdata {realdata}: none of the groups' inputs found")
     total = total_row(rows)
     table = format_table(rows, total)
     elapsed = time.perf_counter() - start
-    settings = {"realdata": str(realdata), "policy": POLICY, "mode": "non_reactive", "num_objects": NUM_OBJECTS,
+    settings = {"realdata": str(realdata), "policy": POLICY, "mode": "non_reactive", "num_objects": args.num_objects,
                 "batch_size": args.batch_size, "elapsed_s": elapsed}
     write_outputs(out, rows, total, table, settings)
     print_fn(table)
