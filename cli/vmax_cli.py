@@ -176,6 +176,7 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
              as_json, out, quiet, gallery_dir, gallery_max, gallery_passed, difficulty, view_file, view_max):
     """Closed-loop evaluation: accuracy, nuPlan and V-Max scores; several policies give one comparison table."""
     from vmax_sim.evaluation import format_summary
+    from vmax_sim.evaluation.evaluate import partial_note
     from vmax_sim.evaluation.extras import EvaluationExtras
     from vmax_sim.evaluation.modes import parse_mode
     from vmax_sim.evaluation.report import (
@@ -185,6 +186,7 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
         write_evaluation_settings,
         write_report,
     )
+    from vmax_sim.training.interrupt import StopRequests
     from vmax_sim.training.run_policy import evaluate_run
     from vmax_sim.visualization.view import run_data
 
@@ -196,10 +198,11 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
         if view_file == VIEW_DEFAULT and out_dir:
             view_file = str(Path(out_dir) / VIEW_DEFAULT)
         extras = EvaluationExtras.create(gallery_dir, gallery_max, gallery_passed, difficulty, view_file, view_max)
-        runs = compare_policies(entries, data, mode, num_scenarios=num_scenarios, batch_size=batch_size,
-                                num_objects=num_objects, seed=seed, progress=not quiet,  # on stderr: --json stays clean
-                                print_fn=lambda line: click.echo(line, err=True), on_batch=extras.on_batch,
-                                run_evaluator=evaluate_run)
+        with StopRequests(on_first=_evaluation_stop_notice) as stop:  # Ctrl-C / SIGTERM: partial results
+            runs = compare_policies(entries, data, mode, num_scenarios=num_scenarios, batch_size=batch_size,
+                                    num_objects=num_objects, seed=seed, progress=not quiet,  # stderr: --json clean
+                                    print_fn=lambda line: click.echo(line, err=True), on_batch=extras.on_batch,
+                                    run_evaluator=evaluate_run, stop=stop)
         summaries = {run.name: run.result.summary for run in runs}
         if len(runs) == 1:
             text = json.dumps(runs[0].result.summary, indent=2)
@@ -220,12 +223,20 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
             if not as_json:
                 click.echo(f"wrote {out}/table.md, table.csv, summaries.json, evaluation.json and "
                            "episodes-<policy>.csv")
+        if stop.requested:
+            click.echo(f"{partial_note(summaries)}; {stop.signal_name} stopped the evaluation", err=True)
+            raise SystemExit(130)
         extras.finish(runs, out, show_tables=not as_json, progress=not quiet and not as_json, print_fn=click.echo,
                       note=f"data: {data or 'the held-out split of each run'}",
                       data=run_data(entries, data, lambda line: click.echo(line, err=True)) if view_file else None,
                       mode_name=mode.name)
     except (InputError, ValueError, OSError) as error:
         _fail(one_line(error))
+
+
+def _evaluation_stop_notice(signal_name: str) -> None:
+    click.echo(f"\n{signal_name}: finishing the batch in flight, then the partial results "
+               "(once more to stop at once)", err=True)
 
 
 @main.command()

@@ -124,7 +124,7 @@ def evaluate(policy, data, mode: str | EvalMode = "non_reactive", *, data_config
              env_config: EnvConfig | None = None, metrics_config: MetricsConfig | None = None,
              obs_config: ObservationConfig | None = None, num_scenarios: int | None = None,
              batch_size: int | None = None, seed: int = 0, policy_params=None, on_batch=None,
-             progress=None) -> EvaluationResult:
+             progress=None, stop=None) -> EvaluationResult:
     """Runs one episode per scenario and scores it.
 
     policy: "expert", "constant", a `Policy`, or a jittable callable `fn(observation, key)` returning the
@@ -140,6 +140,8 @@ def evaluate(policy, data, mode: str | EvalMode = "non_reactive", *, data_config
     episodes); the Rollout then also holds the simulated trajectories (`Rollout.trajectory`). The failure
     gallery and the difficulty report use it (vmax_sim.evaluation.gallery / difficulty).
     progress: a `scenariomax.progress.Progress` (or anything with `update(n)`) told the episodes done.
+    stop: anything with a `requested` flag (vmax_sim.training.interrupt.StopRequests): checked after every
+    batch; once set, the episodes finished so far are the result, marked partial (`mark_partial`).
     """
     mode = _check_mode(mode, seed)
     if isinstance(data, PreparedBatches):
@@ -178,16 +180,44 @@ def evaluate(policy, data, mode: str | EvalMode = "non_reactive", *, data_config
             on_batch(ids, batch, jax.device_get(rollout), real)
         if progress is not None:
             progress.update(real)
+        if stop_requested(stop):
+            break
     if not scenario_ids:
         raise InputError(f"{getattr(data_config, 'path', data)}: no scenarios to evaluate")
     episodes = {name: np.concatenate(parts).astype(np.float32) for name, parts in collected.items()}
-    return EvaluationResult(summary=_summary(episodes, chosen.name, mode), episodes=episodes,
-                            scenario_ids=tuple(scenario_ids))
+    result = EvaluationResult(summary=_summary(episodes, chosen.name, mode), episodes=episodes,
+                              scenario_ids=tuple(scenario_ids))
+    return mark_partial(result, None) if stop_requested(stop) else result
+
+
+def stop_requested(stop) -> bool:
+    """Whether a stop flag (None: never) asks the evaluation to end after the batch in flight."""
+    return stop is not None and bool(stop.requested)
+
+
+def mark_partial(result: EvaluationResult, total: int | None) -> EvaluationResult:
+    """The result with summary["partial"] = {"episodes": done, "of": total (None: unknown)}: an interrupted
+    evaluation's means cover only the scenarios it finished."""
+    done = len(result.scenario_ids)
+    summary = {**result.summary, "partial": {"episodes": done, "of": total}}
+    return dataclasses.replace(result, summary=summary)
+
+
+def partial_note(summaries: dict[str, dict]) -> str | None:
+    """One line saying which results are partial and how many episodes of how many; None if none is."""
+    parts = [(name, s["partial"]) for name, s in summaries.items() if s.get("partial")]
+    if not parts:
+        return None
+    counts = ", ".join(f"{name}: {p['episodes']} of {p['of'] if p['of'] is not None else '?'} episodes"
+                       for name, p in parts)
+    return f"partial results (interrupted): {counts}"
 
 
 def format_summary(summary: dict) -> str:
     """A small table: episodes, the four scores, then the mean of every episode metric."""
     lines = [f"policy: {summary['policy']}  mode: {summary['mode']}  episodes: {summary['num_episodes']}"]
+    if summary.get("partial"):
+        lines[0] += f" of {summary['partial']['of'] or '?'} (PARTIAL: interrupted)"
     if summary.get("num_unjudged"):
         lines[0] += f" ({summary['num_unjudged']} with no judged step left out: their SDC log ends at the start)"
     lines += [f"  {key:<28}{summary[key]:>10.4f}" for key in SCORE_KEYS]

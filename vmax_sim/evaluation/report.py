@@ -31,6 +31,9 @@ from vmax_sim.evaluation.evaluate import (
     _check_mode,
     _summary,
     evaluate,
+    mark_partial,
+    partial_note,
+    stop_requested,
 )
 from vmax_sim.evaluation.policies import POLICY_NAMES
 
@@ -131,7 +134,8 @@ def check_run_evaluator(entries: Sequence[str], run_evaluator: Callable | None) 
 def compare_policies(entries: Sequence[str], data: str | None, mode: str = "non_reactive", *,
                      num_scenarios: int | None = None, batch_size: int = 8, num_objects: int = 64, seed: int = 0,
                      progress: bool = True, print_fn: Callable[[str], None] = print,
-                     on_batch: Callable | None = None, run_evaluator: Callable | None = None) -> list[PolicyRun]:
+                     on_batch: Callable | None = None, run_evaluator: Callable | None = None,
+                     stop=None) -> list[PolicyRun]:
     """Evaluates every entry (a POLICY_NAMES name or a training run directory) on the same scenarios.
 
     Named policies share one pass over `data` (each batch converted once, then run by every policy);
@@ -139,7 +143,9 @@ def compare_policies(entries: Sequence[str], data: str | None, mode: str = "non_
     run's held-out split). When `progress`, stderr shows the scenarios done of the total (scenariomax.progress:
     a bar on a terminal, plain lines otherwise). Returns the columns in the order given. on_batch(column, ids,
     host batch, host Rollout with trajectories, number of real episodes) is called after every batch of
-    every entry (column: its index in `entries`), see `evaluate`.
+    every entry (column: its index in `entries`), see `evaluate`. stop: a flag with `requested` (`evaluate`):
+    once set, the batch in flight finishes, its results are marked partial and the entries not started are left
+    out of the returned list.
     """
     mode = _check_mode(mode, seed)  # an EvalMode: a name gets `seed` as its perturbation seed
     check_entries(entries)
@@ -153,19 +159,20 @@ def compare_policies(entries: Sequence[str], data: str | None, mode: str = "non_
                             include_agent_paths=mode.is_reactive)
         for index, run in zip([i for i, e in enumerate(entries) if e in named],
                               _evaluate_named(named, config, mode, num_scenarios, seed, progress,
-                                              _column_hooks(entries, named, on_batch))):
+                                              _column_hooks(entries, named, on_batch), stop)):
             runs[index] = run
     for index, entry in enumerate(entries):
-        if index in runs:
+        if index in runs or stop_requested(stop):
             continue
         print_fn(f"evaluating the run {entry} ...")
         start = time.perf_counter()
         hook = None if on_batch is None else functools.partial(on_batch, index)
+        stop_kw = {} if stop is None else {"stop": stop}  # an evaluator that cannot stop is still accepted
         result = run_evaluator(entry, data, mode=mode, num_scenarios=num_scenarios, batch_size=batch_size,
-                               on_batch=hook, progress=progress)
+                               on_batch=hook, progress=progress, **stop_kw)
         runs[index] = PolicyRun(result.summary["policy"], result, time.perf_counter() - start,
                                 result.summary["num_episodes"])  # includes compilation
-    ordered = [runs[i] for i in range(len(entries))]
+    ordered = [runs[i] for i in range(len(entries)) if i in runs]
     names = _unique_names([run.name for run in ordered])
     return [dataclasses.replace(run, name=name) for run, name in zip(ordered, names)]
 
@@ -177,7 +184,7 @@ def _column_hooks(entries: Sequence[str], named: Sequence[str], on_batch: Callab
 
 
 def _evaluate_named(names: Sequence[str], config: DataConfig, mode: str, num_scenarios: int | None, seed: int,
-                    progress: bool, hooks: Sequence | None = None) -> list[PolicyRun]:
+                    progress: bool, hooks: Sequence | None = None, stop=None) -> list[PolicyRun]:
     parts: list[list[EvaluationResult]] = [[] for _ in names]
     seconds = [0.0 for _ in names]
     warm = [0 for _ in names]
@@ -194,10 +201,16 @@ def _evaluate_named(names: Sequence[str], config: DataConfig, mode: str, num_sce
                     warm[i] += batch[2]
                 parts[i].append(part)
             shown.update(batch[2])  # every policy has run these scenarios
+            if stop_requested(stop):
+                break
     if not parts[0]:
         raise InputError(f"{config.path}: no scenarios to evaluate")
-    return [PolicyRun(name, _merge(name, mode, results), seconds[i] if warm[i] else math.nan, warm[i])
-            for i, (name, results) in enumerate(zip(names, parts))]
+    merged = [_merge(name, mode, results) for name, results in zip(names, parts)]
+    if stop_requested(stop):
+        total = expected_num_scenarios(config.path, num_scenarios)
+        merged = [mark_partial(result, total) for result in merged]
+    return [PolicyRun(name, result, seconds[i] if warm[i] else math.nan, warm[i])
+            for i, (name, result) in enumerate(zip(names, merged))]
 
 
 def expected_num_scenarios(path: str | None, num_scenarios: int | None = None) -> int | None:
@@ -252,6 +265,9 @@ def format_markdown(runs: Sequence[PolicyRun]) -> str:
     speed = ", ".join(f"{run.name}: {_speed(run)}" for run in runs)
     lines += ["", DIRECTION_NOTE, "", f"episodes: {episodes}",
               f"episodes/s (after the first batch, which compiles): {speed}"]
+    note = partial_note({run.name: run.result.summary for run in runs})
+    if note:
+        lines.append(note)
     unjudged = max(run.result.summary.get("num_unjudged", 0) for run in runs)
     if unjudged:
         lines.append(f"left out of the means: {unjudged} episode(s) with no judged step (the SDC's log ends at "

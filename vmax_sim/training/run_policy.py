@@ -16,7 +16,7 @@ import jax.numpy as jnp
 
 from scenariomax.errors import InputError
 from scenariomax.progress import Progress
-from vmax_sim.evaluation.evaluate import evaluate
+from vmax_sim.evaluation.evaluate import evaluate, mark_partial
 from vmax_sim.evaluation.report import expected_num_scenarios
 from vmax_sim.evaluation.trained import trained_policy
 from vmax_sim.map_index.structure import MapIndexConfig
@@ -75,19 +75,23 @@ def _window_points(config) -> int:
 
 def evaluate_run(run_dir: str | Path, data: str | None = None, mode: str = "non_reactive",
                  num_scenarios: int | None = None, batch_size: int = 8, step: int | None = None, on_batch=None,
-                 progress: bool = False):
+                 progress: bool = False, stop=None):
     """Evaluates a training run's policy on `data` (default: the run's held-out split), with the run's
-    observation and environment settings. `progress`: the scenarios done of the total on stderr."""
+    observation and environment settings. `progress`: the scenarios done of the total on stderr. `stop`: a
+    flag with `requested` (vmax_sim.evaluation.evaluate): once set, the result covers the batches done."""
     loaded = load_trained_policy(run_dir, step)
     config = loaded.config
     # notes go to stderr: stdout may be carrying `evaluate --json`
     path = data or resolve_eval_data(config, lambda line: print(line, file=sys.stderr))
     total = expected_num_scenarios(path, num_scenarios) if progress else None
     with Progress(f"evaluating {Path(run_dir).name}", total, "scenarios", enabled=progress) as shown:
-        return evaluate(loaded.policy, data_config(config, path, batch_size=batch_size), mode=mode,
-                        env_config=components(config)[0].env_config,
-                        obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params,
-                        on_batch=on_batch, progress=shown)
+        result = evaluate(loaded.policy, data_config(config, path, batch_size=batch_size), mode=mode,
+                          env_config=components(config)[0].env_config,
+                          obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params,
+                          on_batch=on_batch, progress=shown, stop=stop)
+    if result.summary.get("partial"):
+        return mark_partial(result, expected_num_scenarios(path, num_scenarios))
+    return result
 
 
 __all__ = ["LoadedPolicy", "evaluate_run", "load_trained_policy"]
