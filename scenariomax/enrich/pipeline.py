@@ -21,6 +21,7 @@ from scenariomax.enrich.paths import PATHS_SOURCE, PathSettings, logged_track, p
 from scenariomax.enrich.speed_limits import with_speed_limits
 from scenariomax.enrich.traffic_lights import LightSettings, with_inferred_lights
 from scenariomax.scenario import Scenario
+from scenariomax.sources.base import MANIFEST_NOTES
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,15 +56,20 @@ def _sdc_paths(scenario: Scenario, lanes, graph, settings: EnrichSettings) -> di
     position = np.array([scenario.x[sdc, start], scenario.y[sdc, start], scenario.z[sdc, start]])
     paths = search_paths(lanes, graph, position, float(scenario.bbox_yaw[sdc, start]), track, track_yaw,
                          settings.path_settings())
-    if not paths:
-        raise ValueError(f"scenario {scenario.scenario_id}: no lane within "
-                         f"{settings.paths.fallback_start_radius_m:g} m of the SDC start, heading aligned")
+    # No lane near the SDC's start, heading aligned (e.g. it starts off the mapped roads): the scenario still
+    # simulates, without an on-route path; `enrich_scenario` notes it for the manifest instead of failing it.
     return paths_to_arrays(paths, settings.num_paths, settings.points_per_path)
+
+
+def with_note(metadata: dict, key: str, value) -> dict:
+    """`metadata` with one more manifest note (see scenariomax.sources.base.MANIFEST_NOTES)."""
+    return {**metadata, MANIFEST_NOTES: {**(metadata.get(MANIFEST_NOTES) or {}), key: value}}
 
 
 def enrich_scenario(scenario: Scenario, settings: EnrichSettings = EnrichSettings()) -> Scenario:
     """The scenario with roadgraph fixes, lane graph, SDC paths, controllable labels, agent paths and
-    inferred lights. Raises ValueError (one line) when e.g. no lane lies near the SDC start."""
+    inferred lights. Raises ValueError (one line) when nothing can be simulated (empty roadgraph, no SDC
+    at the current step); no lane near the SDC start leaves the paths empty, noted under MANIFEST_NOTES."""
     if scenario.roadgraph_xyz.shape[0] == 0:
         raise ValueError(f"scenario {scenario.scenario_id}: empty roadgraph")
     sdc = scenario.sdc_index  # raises ValueError when there is not exactly one SDC
@@ -83,6 +89,10 @@ def enrich_scenario(scenario: Scenario, settings: EnrichSettings = EnrichSetting
         changes.update(lane_graph_to_arrays(lanes, graph, settings.num_lane_links))
     if settings.build_paths and not scenario.metadata.get(PATHS_SOURCE):  # a source's own paths are kept
         changes.update(_sdc_paths(scenario, lanes, graph, settings))
+        if not changes["path_valid"].any():
+            changes["metadata"] = with_note(scenario.metadata, "no_sdc_path",
+                                            f"no lane within {settings.paths.fallback_start_radius_m:g} m of the "
+                                            f"SDC start, heading aligned")
     if settings.label_controllable:
         controllable = controllable_mask(scenario, lanes, settings.controllable)
         changes["is_controllable"] = controllable

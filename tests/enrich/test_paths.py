@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from scenariomax import schema as sch
 from scenariomax.enrich import EnrichSettings, enrich_scenario
 from scenariomax.enrich.geometry import project_to_polyline
 from scenariomax.enrich.roadgraph import MapPolyline
+from scenariomax.sources.base import MANIFEST_NOTES
 from tests.enrich.scenes import CURRENT, NUM_STEPS, line, make_scenario, straight_xy, track
 
 LANE = sch.RG_LANE_SURFACE_STREET
@@ -73,13 +73,16 @@ def test_missing_connector_is_bridged_along_the_log():
     assert list(dict.fromkeys(out.path_lane_id[0][out.path_valid[0]].tolist())) == [1, 2]
 
 
-def test_no_lane_near_the_sdc_is_a_one_line_value_error():
+def test_no_lane_near_the_sdc_leaves_no_path_and_a_note():
+    """Not a failure (issue 24): the scenario simulates without an on-route path, and the manifest says why."""
     polylines = [MapPolyline(1, LANE, line((0, 50), (100, 50)))]
-    with pytest.raises(ValueError, match="no lane within"):
-        enrich_scenario(make_scenario(polylines, [track(straight_xy(10, 10.0))]), FAST)
+    out = enrich_scenario(make_scenario(polylines, [track(straight_xy(10, 10.0))]), FAST)
+    assert not out.path_valid.any() and not out.path_on_route.any()
+    assert "no lane within" in out.metadata[MANIFEST_NOTES]["no_sdc_path"]
+    assert not out.validate()
 
 
 def test_lane_heading_against_the_sdc_is_not_a_start_lane():
     polylines = [MapPolyline(1, LANE, line((200, 0), (0, 0), 200))]  # runs west, SDC drives east
-    with pytest.raises(ValueError):
-        enrich_scenario(make_scenario(polylines, [track(straight_xy(10, 10.0))]), FAST)
+    out = enrich_scenario(make_scenario(polylines, [track(straight_xy(10, 10.0))]), FAST)
+    assert not out.path_valid.any() and "no_sdc_path" in out.metadata[MANIFEST_NOTES]

@@ -642,7 +642,8 @@ def no_window_reason(sdc_key, sdc_valid: np.ndarray, starts: list[int], num_past
     shown = ", ".join(str(c) for c in currents[:5]) + (", ..." if len(currents) > 5 else "")
     valid_steps = np.flatnonzero(sdc_valid)
     where = f"steps {valid_steps[0]}-{valid_steps[-1]}" if len(valid_steps) else "no step"
-    return (f"the SDC (track {sdc_key}) is not valid at the current step of any window (log step{'s' * (len(currents) > 1)} "
+    plural = "s" * (len(currents) > 1)
+    return (f"the SDC (track {sdc_key}) is not valid at the current step of any window (log step{plural} "
             f"{shown}); it is valid on {len(valid_steps)} of {len(sdc_valid)} steps at 10 Hz ({where})")
 
 
