@@ -99,8 +99,9 @@ def _env_kinds(choice: str) -> tuple[str, ...]:
                    "train.eval_every, train.checkpoint_every, train.keep_checkpoints, train.max_wall_minutes, "
                    "e.g. to extend a run). Ctrl-C or SIGTERM during a run saves a checkpoint first.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@_check_options
 @click.argument("overrides", nargs=-1)
-def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
+def train(preset, data, eval_data, out, resume_dir, quiet, deep, skip_checks, overrides):
     """Train a policy. OVERRIDES are section.field=value, e.g. algo.learning_rate=3e-4 train.total_env_steps=1e5."""
     import time as _time
 
@@ -111,12 +112,17 @@ def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
         if resume_dir:
             if data or eval_data:
                 _fail("--resume continues a run with its own config.json and data; drop --data / --eval-data")
+            from vmax_sim.training.run import load_run_config
+
+            resumed = load_run_config(resume_dir).data
+            _check_data([resumed.train, resumed.eval], deep, skip_checks, quiet)
             result = run_training(None, resume_dir, resume=True, progress=not quiet, print_fn=click.echo,
                                   resume_overrides=overrides)
         else:
             config = preset_config(preset)
             extra = [f"data.train={data}"] * bool(data) + [f"data.eval={eval_data}"] * bool(eval_data)
             config = apply_overrides(config, extra + list(overrides))
+            _check_data([config.data.train, config.data.eval], deep, skip_checks, quiet)
             run_dir = out or f"runs/{preset}-{_time.strftime('%Y%m%d-%H%M%S')}"
             click.echo(f"run directory: {run_dir}")
             result = run_training(config, run_dir, progress=not quiet, print_fn=click.echo)
@@ -172,8 +178,10 @@ def train(preset, data, eval_data, out, resume_dir, quiet, overrides):
                    "directory when one is given).")
 @click.option("--view-max", type=click.IntRange(1), default=8, show_default=True,
               help="Scenarios on the --view page.")
+@_check_options
 def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, num_scenarios, num_objects, seed,
-             as_json, out, quiet, gallery_dir, gallery_max, gallery_passed, difficulty, view_file, view_max):
+             as_json, out, quiet, gallery_dir, gallery_max, gallery_passed, difficulty, view_file, view_max, deep,
+             skip_checks):
     """Closed-loop evaluation: accuracy, nuPlan and V-Max scores; several policies give one comparison table."""
     from vmax_sim.evaluation import format_summary
     from vmax_sim.evaluation.evaluate import partial_note
@@ -194,6 +202,7 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
         mode_name = mode
         mode = parse_mode(mode, agents=agents, perturb_sigma=perturb_sigma, max_agents=max_agents, seed=seed)
         entries = split_policies(policy)
+        _check_data([data or ""], deep, skip_checks, quiet)  # without --data a run's held-out split is checked as read
         out_dir = out if out and not out.endswith(".json") else None
         if view_file == VIEW_DEFAULT and out_dir:
             view_file = str(Path(out_dir) / VIEW_DEFAULT)
