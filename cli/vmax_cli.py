@@ -86,6 +86,28 @@ def _env_kinds(choice: str) -> tuple[str, ...]:
     return ("real", "minimal") if choice == "both" else (choice,)
 
 
+def _check_options(fn):
+    """--deep / --skip-checks of the commands that read shards for a long time (vmax_sim/data/precheck.py)."""
+    fn = click.option("--skip-checks", is_flag=True,
+                      help="Start without first reading every record's framing and CRC (bad values still stop the "
+                           "run when read).")(fn)
+    return click.option("--deep", is_flag=True,
+                        help="Before starting, also check every record's values against plausible physical ranges "
+                             "(as `scenariomax validate --deep`; ~2 ms a record).")(fn)
+
+
+def _check_data(specs, deep: bool, skip: bool, quiet: bool) -> None:
+    """The shards named by `specs` checked up front (framing and CRC; `deep`: plausibility); InputError on the
+    first bad record, naming its file and index."""
+    if skip:
+        return
+    from vmax_sim.data.precheck import check_shards, shard_paths
+
+    paths = shard_paths(specs)
+    if paths:
+        check_shards(paths, deep=deep, progress=not quiet)
+
+
 @main.command(context_settings={"ignore_unknown_options": False})
 @click.option("--preset", default="sac", show_default=True,
               help="Words joined by dashes: algorithm (sac, ppo, bc, bc_sac), encoder (none, mlp, lq, lqh, mtr, "
