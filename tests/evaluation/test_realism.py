@@ -14,9 +14,6 @@ import pytest
 from click.testing import CliRunner
 
 from vmax_cli.vmax_cli import main
-from vmax_sim.evaluation.realism import rectangle_signed_distance as _rectangle_signed_distance
-from vmax_sim.evaluation.realism import rounded_box_distance as _rounded_box_distance
-from vmax_sim.evaluation.realism import scene_likelihoods as _scene_likelihoods
 from vmax_sim.evaluation.realism import (
     CHALLENGE_2024,
     FeatureConfig,
@@ -29,6 +26,9 @@ from vmax_sim.evaluation.realism import (
     time_to_collision,
     timeseries_log_likelihood,
 )
+from vmax_sim.evaluation.realism import rectangle_signed_distance as _rectangle_signed_distance
+from vmax_sim.evaluation.realism import rounded_box_distance as _rounded_box_distance
+from vmax_sim.evaluation.realism import scene_likelihoods as _scene_likelihoods
 
 NUM_OBJECTS = 16
 

@@ -68,14 +68,15 @@ def accel_noise(action: Action, key: jax.Array, env, sigma: float) -> Action:
 
 def policy_rollout_fn(env, sdc_policy: Policy, agent_fn: AgentFn | None, num_rollouts: int, max_agents: int,
                       *, stochastic: bool = False, action_noise: float = 0.0, params=None,
-                      metrics_config: MetricsConfig = MetricsConfig(),
-                      obs_config: ObservationConfig = ObservationConfig()) -> RolloutFn:
+                      metrics_config: MetricsConfig | None = None,
+                      obs_config: ObservationConfig | None = None) -> RolloutFn:
     """Rollouts where `sdc_policy` drives the SDC and `agent_fn` each evaluated agent (on its own view,
     `reactive.agent_view`); agent_fn None: `sdc_policy`'s action drives every controlled row (e.g. constant).
     The evaluated objects are controlled, everyone else replays the log. stochastic: the drivers sample
     (otherwise, and without action_noise, one rollout is run and weighted as num_rollouts identical ones).
     action_noise: standard deviation of an acceleration noise (m/s^2) added to every action each step.
     Jitted; params are an argument of the compiled function (new weights never recompile)."""
+    metrics_config, obs_config = metrics_config or MetricsConfig(), obs_config or ObservationConfig()
     first, num_steps = env.config.first_policy_timestep, env.config.episode_length
     distinct = stochastic or action_noise > 0.0
     runs, copies = (num_rollouts, 1) if distinct else (1, num_rollouts)
@@ -151,11 +152,12 @@ def sampled_policy(learner, name: str = "trained") -> Policy:
 
 def trained_rollout_fn(learner, params, env, obs_config: ObservationConfig, num_rollouts: int, max_agents: int,
                        *, deterministic: bool = False, action_noise: float = 0.0, name: str = "trained",
-                       metrics_config: MetricsConfig = MetricsConfig()) -> RolloutFn:
+                       metrics_config: MetricsConfig | None = None) -> RolloutFn:
     """A trained learner drives the SDC and every evaluated agent (self-play through `reactive.agent_view`),
     sampling its actions (deterministic: the mean action, one rollout for all unless action_noise)."""
     from vmax_sim.evaluation.trained import trained_policy
 
+    metrics_config = metrics_config or MetricsConfig()
     policy = trained_policy(learner, name) if deterministic else sampled_policy(learner, name)
     return policy_rollout_fn(env, policy, policy_agent_fn(policy, metrics_config, obs_config), num_rollouts,
                              max_agents, stochastic=not deterministic, action_noise=action_noise, params=params,

@@ -42,12 +42,13 @@ def _states(data_config: DataConfig, num_scenes: int | None):
 
 def evaluate_realism(rollout_fn: RolloutFn, data_config: DataConfig, *, policy: str = "custom",
                      num_rollouts: int = 32, num_scenes: int | None = None, max_agents: int = DEFAULT_MAX_AGENTS,
-                     config: RealismConfig = RealismConfig(), seed: int = 0, progress=None,
+                     config: RealismConfig | None = None, seed: int = 0, progress=None,
                      settings: dict | None = None) -> RealismResult:
     """Runs `rollout_fn` on every scene of data_config.path (the first num_scenes) and scores it.
 
     The data must carry the map index and the agents' paths (they are switched on here). progress: anything
     with `update(n)`, told the scenes done. settings: extra JSON entries for the summary."""
+    config = config or RealismConfig()
     data_config = dataclasses.replace(data_config, include_map_index=True, include_agent_paths=True)
 
     @jax.jit
@@ -107,7 +108,7 @@ class TrainedRun:
 def realism_for_policy(policy: str, data_config: DataConfig | None = None, *, trained: TrainedRun | None = None,
                        num_rollouts: int = 32, num_scenes: int | None = None, max_agents: int = DEFAULT_MAX_AGENTS,
                        action_noise: float = 0.0, deterministic: bool = False, seed: int = 0,
-                       config: RealismConfig = RealismConfig(), progress=None) -> RealismResult:
+                       config: RealismConfig | None = None, progress=None) -> RealismResult:
     """`evaluate_realism` of a named policy ("log", "constant", "idm", on `data_config`) or of a trained run
     (`trained`, on its own data config)."""
     from vmax_sim.env.config import EnvConfig
@@ -158,5 +159,5 @@ def format_realism(summaries: list[dict]) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["DEFAULT_MAX_AGENTS", "RealismResult", "TrainedRun", "evaluate_realism", "format_realism", "realism_for_policy",
-           "scene_key", "summarise"]
+__all__ = ["DEFAULT_MAX_AGENTS", "RealismResult", "TrainedRun", "evaluate_realism", "format_realism",
+           "realism_for_policy", "scene_key", "summarise"]
