@@ -96,8 +96,8 @@ _common_pipeline_options = [
     click.option("--num-paths", type=int, default=10, show_default=True, help="SDC paths per scenario."),
     click.option("--points-per-path", type=int, default=300, show_default=True, help="Points per SDC path."),
     click.option("--compression", type=click.Choice(["none", "gzip"]), default="none", show_default=True,
-                 help="gzip: TFRecord GZIP shards, ~5-20x smaller (tf.data: compression_type='GZIP'); every "
-                      "reader here detects it. none keeps the plain files Waymax reads."),
+                 help="gzip: TFRecord GZIP shards, 5-25% of the plain bytes (tf.data: compression_type='GZIP'); "
+                      "every reader here detects it. none: the plain files Waymax reads."),
 ]
 
 
