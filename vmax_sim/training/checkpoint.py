@@ -12,7 +12,10 @@ it again before writing (up to two buffers' worth of extra memory while saving, 
 from __future__ import annotations
 
 import dataclasses
+import errno
 import functools
+import logging
+import warnings
 from pathlib import Path
 
 import jax
@@ -24,6 +27,36 @@ from scenariomax.errors import InputError
 from vmax_sim.training.loop import TrainCarry
 
 SLICE_BYTES = 4 * 2**20  # bytes moved between the device and a file at a time (larger: more memory, no faster)
+
+
+class _DropRaisedInThread(logging.Filter):
+    """Orbax saves in a helper thread, logs its exception with a traceback, then raises it again in the caller:
+    an OS error (a full disk) would reach the screen twice, once as a traceback. The caller reports it."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        error = record.exc_info[1] if record.exc_info else None
+        return not (isinstance(error, OSError) and "raised an exception" in str(record.msg))
+
+
+logging.getLogger("absl").addFilter(_DropRaisedInThread())
+
+
+def quiet_abandoned_saves() -> None:
+    """Orbax sorts a checkpoint's items by name and writes the blocking replay after creating the coroutines of
+    the items before it ("host", "learner"): when the replay fails (a full disk), those are never awaited and
+    Python warns at exit, under the one-line error that already says the checkpoint was not written."""
+    warnings.filterwarnings("ignore", message=r"coroutine '\w+CheckpointHandler\.async_save' was never awaited",
+                            category=RuntimeWarning)
+
+
+def _disk_error(error: Exception, folder: Path) -> OSError | None:
+    """An OSError naming `folder` for a write error that names no file: ours (a file handle's write) carries
+    no name, TensorStore's (Orbax's array writer) is a ValueError whose text says ENOSPC. None otherwise."""
+    if isinstance(error, OSError) and error.errno is not None:
+        return error if error.filename else OSError(error.errno, error.strerror, str(folder))
+    if isinstance(error, ValueError) and "No space left on device" in str(error):
+        return OSError(errno.ENOSPC, "No space left on device", str(folder))
+    return None
 
 
 def _tree(carry: TrainCarry) -> dict:
@@ -114,6 +147,7 @@ class ReplayRestore(ocp.args.CheckpointArgs):
 class CheckpointStore:
     def __init__(self, directory: Path, keep: int = 2):
         self.directory = Path(directory).absolute()
+        quiet_abandoned_saves()
         options = ocp.CheckpointManagerOptions(max_to_keep=keep, enable_async_checkpointing=False, create=True)
         self.manager = ocp.CheckpointManager(self.directory, options=options)
 
@@ -125,8 +159,14 @@ class CheckpointStore:
                  "host": ocp.args.JsonSave(host)}
         if with_buffer and carry.buffer is not None:
             items["replay"] = ReplaySave(carry.buffer)
-        self.manager.save(step, args=ocp.args.Composite(**items), force=True)
-        self.manager.wait_until_finished()
+        try:
+            self.manager.save(step, args=ocp.args.Composite(**items), force=True)
+            self.manager.wait_until_finished()
+        except (OSError, ValueError) as error:
+            named = _disk_error(error, self.directory)
+            if named is None:
+                raise
+            raise named from None
 
     def host_state(self, step: int) -> dict:
         return dict(self.manager.restore(step, args=ocp.args.Composite(host=ocp.args.JsonRestore())).host)

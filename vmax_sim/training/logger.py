@@ -23,6 +23,7 @@ class RunLogger:
         for row in self.rows:
             self.columns += [k for k in row if k not in self.columns]
         self._writer = None
+        self._events: _QuietEvents | None = None
         if tensorboard:
             try:
                 from tensorboardX import SummaryWriter
@@ -31,6 +32,7 @@ class RunLogger:
                               stacklevel=2)
             else:
                 self._writer = SummaryWriter(str(Path(run_dir) / "tensorboard"))
+                self._events = _guard_events(self._writer)
 
     def _read(self) -> list[dict[str, float]]:
         if not self.path.exists():
@@ -44,6 +46,7 @@ class RunLogger:
         self._rewrite()
 
     def log(self, env_steps: int, scalars: dict[str, float]) -> None:
+        self._raise_writer_error()
         row = {STEP_KEY: float(env_steps)}
         row.update({k: float(v) for k, v in scalars.items()})
         self.rows.append(row)
@@ -70,6 +73,13 @@ class RunLogger:
             writer.writerows(_formatted(row) for row in self.rows)
         temporary.replace(self.path)
 
+    def _raise_writer_error(self) -> None:
+        """The OS error the event writer met (a full disk), raised here once; `flush`, which also runs while
+        another error is on its way out, never raises it."""
+        if self._events is not None and self._events.error is not None:
+            error, self._events.error = self._events.error, None
+            raise error
+
     def flush(self) -> None:
         if self._writer is not None:
             self._writer.flush()
@@ -77,6 +87,48 @@ class RunLogger:
     def close(self) -> None:
         if self._writer is not None:
             self._writer.close()
+        self._raise_writer_error()
+
+
+class _QuietEvents:
+    """tensorboardX's events file behind a guard: its writer thread (and its exit hook) would print a traceback
+    on an OS error such as a full disk; the first error is kept for `RunLogger` to raise and later events dropped."""
+
+    def __init__(self, inner, folder: Path):
+        self._inner, self._folder, self.error, self.failed = inner, folder, None, False
+
+    def _call(self, name: str, *args):
+        if self.failed:
+            return None
+        try:
+            return getattr(self._inner, name)(*args)
+        except OSError as error:
+            self.failed = True
+            self.error = error if error.filename else OSError(error.errno, error.strerror, str(self._folder))
+            return None
+
+    def write_event(self, event) -> None:
+        self._call("write_event", event)
+
+    def flush(self) -> None:
+        self._call("flush")
+
+    def close(self) -> None:
+        self._call("close")
+
+
+def _guard_events(writer) -> _QuietEvents | None:
+    """Puts `_QuietEvents` between tensorboardX's writer (its thread included) and its events file; None (no
+    guard) when this tensorboardX is laid out otherwise."""
+    file_writer = writer._get_file_writer()
+    events = getattr(getattr(file_writer, "event_writer", None), "_ev_writer", None)
+    worker = getattr(file_writer.event_writer, "_worker", None) if events is not None else None
+    if events is None or not hasattr(worker, "_record_writer"):
+        return None
+    guard = _QuietEvents(events, Path(writer.logdir))
+    file_writer.event_writer._ev_writer = guard
+    worker._record_writer = guard
+    return guard
 
 
 def _formatted(row: dict[str, float]) -> dict[str, str]:
