@@ -7,7 +7,8 @@ left/right neighbours, until a path reaches the point budget or a dead end. Bran
 logged trajectory drives over are explored first, and the search is capped (`max_candidates`,
 `max_expansions`), so its cost stays bounded in dense intersections.
 
-Lane changes: when the logged trajectory moves from lane A to its neighbour B, the path blends
+Lane changes: only into a neighbour running the same way (a source may name the oncoming lane a neighbour, as
+AV2 does). When the logged trajectory moves from lane A to its neighbour B, the path blends
 from A to B exactly where the log does (the blend weight follows the logged lateral position
 between the two centrelines), so the on-route path keeps hugging the logged trajectory. Without
 such evidence, a lane change starts `default_change_delay_m` ahead and blends over
@@ -181,6 +182,13 @@ def _logged_change(track: np.ndarray, line_a: np.ndarray, cum_a: np.ndarray, lin
     return dense, np.interp(dense, arcs, weights)
 
 
+def _direction_at(line: np.ndarray, cum: np.ndarray, arc: float) -> np.ndarray:
+    """Unit direction (2,) of a polyline (n >= 2, 3) at arc length `arc`: its segment there."""
+    segment = int(np.clip(np.searchsorted(cum, arc, side="right") - 1, 0, len(line) - 2))
+    step = line[segment + 1, :2] - line[segment, :2]
+    return step / max(float(np.hypot(*step)), 1e-9)
+
+
 def _lane_change(lanes: Lanes, lane_a: int, arc_from: float, lane_b: int, track: np.ndarray,
                  settings: PathSettings) -> tuple[_Piece, float] | None:
     """The piece from `arc_from` on A through the blend onto B, and the arc on B where it lands."""
@@ -203,6 +211,10 @@ def _lane_change(lanes: Lanes, lane_a: int, arc_from: float, lane_b: int, track:
     offset, arc_b, _ = project_to_polyline(on_a, line_b)
     if offset[-1] > settings.max_change_offset_m or arc_b[-1] >= cum_b[-1] - 1e-3:
         return None  # B does not run alongside A where the change ends
+    if _direction_at(line_a, cum_a, arcs[-1]) @ _direction_at(line_b, cum_b, arc_b[-1]) <= 0.0:
+        # B runs the other way (AV2 names the oncoming lane a neighbour): "changing" into it turns the path back
+        # along itself, a loop past the log's end and outside the road edges
+        return None
     on_b = point_at_arc(line_b, cum_b, arc_b)
     blended = (1.0 - weights)[:, None] * on_a + weights[:, None] * on_b
     before = slice_polyline(line_a, cum_a, arc_from, arcs[0])[:-1]

@@ -86,3 +86,22 @@ def test_lane_heading_against_the_sdc_is_not_a_start_lane():
     polylines = [MapPolyline(1, LANE, line((200, 0), (0, 0), 200))]  # runs west, SDC drives east
     out = enrich_scenario(make_scenario(polylines, [track(straight_xy(10, 10.0))]), FAST)
     assert not out.path_valid.any() and "no_sdc_path" in out.metadata[MANIFEST_NOTES]
+
+
+def test_an_oncoming_neighbour_is_no_lane_change_and_no_path_turns_back():
+    """AV2 names the oncoming lane a left neighbour: a "lane change" into it made paths loop back past the log's
+    end, outside the road edges. The same-direction neighbour still gets its lane change."""
+    from scenariomax.enrich.roadgraph import LaneLinks, lane_graph_arrays
+
+    east = MapPolyline(1, LANE, line((0, 0), (120, 0), 240))
+    west = MapPolyline(2, LANE, line((120, 3.5), (0, 3.5), 240))  # oncoming, named 1's left neighbour
+    beside = MapPolyline(3, LANE, line((0, -3.5), (120, -3.5), 240))  # same way, 1's right neighbour
+    links = lane_graph_arrays([LaneLinks(1, left_neighbors=(2,), right_neighbors=(3,)), LaneLinks(2),
+                               LaneLinks(3)])
+    xy = straight_xy(10, 5.0)  # ends at x=55, before the lanes do
+    out = enrich_scenario(make_scenario([east, west, beside], [track(xy)], **links), FAST)
+    for p in np.flatnonzero(out.path_valid.any(axis=1)):
+        points = out.path_xyz[p][out.path_valid[p]]
+        assert (np.diff(points[:, 0]) > -1e-3).all(), f"path {p} turns back west: {points[-1]}"
+        assert 2 not in set(out.path_lane_id[p][out.path_valid[p]])
+    assert any(3 in set(out.path_lane_id[p][out.path_valid[p]]) for p in range(10))
