@@ -132,20 +132,21 @@ def iter_records(path: str | os.PathLike, check_crc: bool = True) -> Iterator[by
 
 def iter_records_from_stream(stream: BinaryIO, name: str, check_crc: bool = True) -> Iterator[bytes]:
     """`iter_records` of an open binary stream (only `read` is used), gunzipped when it is gzip data."""
-    stream = decompressed(stream, name)
-    compressed = isinstance(stream, _Gunzipped)
+    records = decompressed(stream, name)
+    compressed = isinstance(records, _Gunzipped)
     offset = 0
     index = 0
     while True:
-        length = _read_length(stream, name, index, offset, check_crc, compressed)
+        length = _read_length(records, name, index, offset, check_crc, compressed)
         if length is None:
             return
-        data = stream.read(length)
-        footer = stream.read(_FOOTER.size)
+        data = records.read(length)
+        footer = records.read(_FOOTER.size)
+        where = f"byte {offset}{' of the decompressed data' if compressed else ''}"
         if len(data) < length or len(footer) < _FOOTER.size:
-            raise _record_error(name, f"truncated record at byte {offset} (expected {length} bytes of data)")
+            raise _record_error(name, f"truncated record at {where} (expected {length} bytes of data)")
         if check_crc and masked_crc32c(data) != _FOOTER.unpack(footer)[0]:
-            raise _record_error(name, f"corrupt record {index}: data CRC mismatch at byte {offset}")
+            raise _record_error(name, f"corrupt record {index}: data CRC mismatch at {where}")
         yield data
         offset += _HEADER.size + length + _FOOTER.size
         index += 1

@@ -193,3 +193,22 @@ def test_a_manifest_from_before_compression_resumes_as_uncompressed(tmp_path):
     del manifest["settings"]["compression"]
     (out / "manifest.json").write_text(json.dumps(manifest))
     assert convert(ToySource(), ConvertSettings(out=out, resume=True, **common)).num_scenarios == before.num_scenarios
+
+
+def test_the_cli_converts_with_compression_gzip_and_every_command_reads_it(tmp_path):
+    from cli.scenariomax_cli import main
+
+    out = tmp_path / "shards"
+    runner = CliRunner()
+    result = runner.invoke(main, ["convert", "--dataset", "synthetic", "--num-scenarios", "2", "--num-objects", "8",
+                                  "--roadgraph-points", "500", "--num-paths", "2", "--points-per-path", "20",
+                                  "--no-enrich", "--workers", "1", "--compression", "gzip", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    files = sorted(out.glob("*.tfrecord"))
+    assert files and all(file_compression(file) == "gzip" for file in files)
+    assert json.loads((out / "manifest.json").read_text())["settings"]["compression"] == "gzip"
+    for command in (["validate", str(out)], ["inspect", str(out)],
+                    ["view", str(out), "--out", str(tmp_path / "view.html")]):
+        outcome = runner.invoke(main, command)
+        assert outcome.exit_code == 0, (command, outcome.output)
+    assert "2 records in 1 files: all valid" in runner.invoke(main, ["validate", str(out)]).output
