@@ -61,8 +61,8 @@ def test_orbax_saves_left_unawaited_by_a_failed_checkpoint_do_not_warn():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         quiet_abandoned_saves()
-        warnings.warn("coroutine 'JsonCheckpointHandler.async_save' was never awaited", RuntimeWarning)
-        warnings.warn("coroutine 'mine' was never awaited", RuntimeWarning)
+        warnings.warn("coroutine 'JsonCheckpointHandler.async_save' was never awaited", RuntimeWarning, stacklevel=1)
+        warnings.warn("coroutine 'mine' was never awaited", RuntimeWarning, stacklevel=1)
     assert [str(w.message) for w in caught] == ["coroutine 'mine' was never awaited"]
 
 
