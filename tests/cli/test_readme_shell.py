@@ -45,8 +45,9 @@ SHORTER = [
     (r"--num-scenarios 200\b", "--num-scenarios 4"),
     # one bench configuration, few steps (the full bench runs for many minutes)
     (r"^vmax-sim bench\b", "vmax-sim bench --batch-sizes 1 --steps 5 --env minimal"),
-    # one training configuration, one chunk, on the tiny shards with the tiny settings below
-    (r"^python benchmarks/training.py$", "python benchmarks/training.py --only bc-mlp --chunks 1 {TINY}"),
+    # one training configuration, one chunk, with the tiny settings below; the script is the checkout's (the
+    # README runs it from the checkout, this test from a temporary folder)
+    (r"^python benchmarks/training.py$", f"python {REPO}/benchmarks/training.py --only bc-mlp --chunks 1 {{TINY}}"),
     # a one-hour budget: the tiny step count ends the run first
     (r"train\.max_wall_minutes=60", "train.max_wall_minutes=60 {TINY}"),
     # section.field=value ...: the overrides that make a run take seconds (tests/training/conftest.py)
