@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.datatypes import Action, RoadgraphPoints, SimulatorState
+from vmax_sim.env.agent_view import agent_view, check_agent_paths, choose_agents  # noqa: F401 (re-exported)
 from vmax_sim.env.metrics_adapter import sdc_index, sdc_observation, step_inputs
 from vmax_sim.evaluation.modes import EvalMode
 from vmax_sim.evaluation.policies import Policy
@@ -29,27 +30,6 @@ LOG_CAP_WINDOW_M = (10.0, 60.0)  # m behind / ahead of the agent where its logge
 
 # (params, agent view, key) -> the agent's action (action_dim,) in the env's convention, and its validity ()
 AgentFn = Callable[[object, SimulatorState, jax.Array], tuple[jax.Array, jax.Array]]
-
-
-def check_agent_paths(state: SimulatorState) -> None:
-    if state.agent_paths is None:
-        raise ValueError("reactive evaluation needs the agents' paths: load the data with "
-                         "DataConfig(include_agent_paths=True)")
-
-
-def choose_agents(state: SimulatorState, max_agents: int, timestep: int) -> tuple[jax.Array, jax.Array]:
-    """The slots of the agents to drive: controllable, not the SDC, present at `timestep`, with a path;
-    at most max_agents of them, nearest the SDC first. -> slots (K,) int32, valid (K,) bool, K = min(max_agents, N).
-    """
-    meta, log = state.object_metadata, state.log_trajectory
-    present = log.valid[:, timestep]
-    has_path = jnp.any(state.agent_paths.valid, axis=-1)
-    eligible = meta.is_controllable & ~meta.is_sdc & present & has_path  # (N,)
-    sdc = sdc_index(state)
-    distance = jnp.hypot(log.x[:, timestep] - log.x[sdc, timestep], log.y[:, timestep] - log.y[sdc, timestep])
-    k = min(max_agents, state.num_objects)
-    _, slots = jax.lax.top_k(-jnp.where(eligible, distance, jnp.inf), k)
-    return slots.astype(jnp.int32), eligible[slots]
 
 
 def stop_sign_points(state: SimulatorState, max_points: int = MAX_STOP_SIGN_POINTS) -> RoadgraphPoints:
@@ -69,18 +49,6 @@ def stop_sign_points(state: SimulatorState, max_points: int = MAX_STOP_SIGN_POIN
     _, index = jax.lax.top_k(-jnp.where(is_sign, distance, jnp.inf), k)
     kept = jax.tree.map(lambda a: a[index], rg)
     return kept.replace(valid=is_sign[index])
-
-
-def agent_view(state: SimulatorState, slot: jax.Array, roadgraph: RoadgraphPoints | None = None) -> SimulatorState:
-    """The state as the agent in `slot` sees it: it is "the SDC" and its own path is the only route
-    (on_route). The real SDC becomes an ordinary object. roadgraph: replaces `roadgraph_points` (e.g.
-    `stop_sign_points`). () slot -> SimulatorState (sdc_paths (1, Q))."""
-    meta = state.object_metadata
-    is_sdc = jnp.arange(state.num_objects) == slot
-    own = jax.tree.map(lambda a: a[slot][None], state.agent_paths)  # (1, Q) fields, on_route (1,)
-    own = own.replace(on_route=jnp.ones_like(own.on_route))
-    view = state.replace(object_metadata=meta.replace(is_sdc=is_sdc), sdc_paths=own, agent_paths=None)
-    return view if roadgraph is None else view.replace(roadgraph_points=roadgraph)
 
 
 def agents_action(state: SimulatorState, slots: jax.Array, slot_valid: jax.Array, agent_fn: AgentFn, params,

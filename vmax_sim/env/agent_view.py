@@ -1,0 +1,69 @@
+"""An agent's view of a scene: the state with the SDC flag moved to the agent's slot and the agent's own path
+(`SimulatorState.agent_paths`) as its only route, so every SDC-centred function (observation, metrics, reward,
+the planners) serves any agent unchanged; and the choice of which agents to drive.
+
+Used by reactive evaluation (rule or learned agents around the evaluated SDC) and by self-play training
+(`vmax_sim.env.selfplay`). Everything works on one unbatched state and is jittable.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from vmax_sim.datatypes import RoadgraphPoints, SimulatorState
+from vmax_sim.env.metrics_adapter import sdc_index
+
+
+def check_agent_paths(state: SimulatorState) -> None:
+    if state.agent_paths is None:
+        raise ValueError("reactive evaluation needs the agents' paths: load the data with "
+                         "DataConfig(include_agent_paths=True)")
+
+
+def choose_agents(state: SimulatorState, max_agents: int, timestep: int) -> tuple[jax.Array, jax.Array]:
+    """The slots of the agents to drive: controllable, not the SDC, present at `timestep`, with a path;
+    at most max_agents of them, nearest the SDC first. -> slots (K,) int32, valid (K,) bool, K = min(max_agents, N).
+    """
+    meta, log = state.object_metadata, state.log_trajectory
+    present = log.valid[:, timestep]
+    has_path = jnp.any(state.agent_paths.valid, axis=-1)
+    eligible = meta.is_controllable & ~meta.is_sdc & present & has_path  # (N,)
+    sdc = sdc_index(state)
+    distance = jnp.hypot(log.x[:, timestep] - log.x[sdc, timestep], log.y[:, timestep] - log.y[sdc, timestep])
+    k = min(max_agents, state.num_objects)
+    _, slots = jax.lax.top_k(-jnp.where(eligible, distance, jnp.inf), k)
+    return slots.astype(jnp.int32), eligible[slots]
+
+
+def agent_view(state: SimulatorState, slot: jax.Array, roadgraph: RoadgraphPoints | None = None) -> SimulatorState:
+    """The state as the agent in `slot` sees it: it is "the SDC" and its own path is the only route
+    (on_route). The real SDC becomes an ordinary object. roadgraph: replaces `roadgraph_points` (e.g.
+    `stop_sign_points`). () slot -> SimulatorState (sdc_paths (1, Q))."""
+    meta = state.object_metadata
+    is_sdc = jnp.arange(state.num_objects) == slot
+    own = jax.tree.map(lambda a: a[slot][None], state.agent_paths)  # (1, Q) fields, on_route (1,)
+    own = own.replace(on_route=jnp.ones_like(own.on_route))
+    view = state.replace(object_metadata=meta.replace(is_sdc=is_sdc), sdc_paths=own, agent_paths=None)
+    return view if roadgraph is None else view.replace(roadgraph_points=roadgraph)
+
+
+def with_sdc_route(state: SimulatorState) -> SimulatorState:
+    """The state whose `agent_paths` row of the SDC holds the SDC's on-route path (cut or padded to the agent
+    paths' length), so the SDC is one more agent with a route of its own (self-play). Without an on-route path
+    the row stays as it was (invalid)."""
+    paths, agents = state.sdc_paths, state.agent_paths
+    length = agents.x.shape[-1]
+    route = jnp.argmax(paths.on_route)  # the first on-route path
+    has_route = jnp.any(paths.on_route)
+    sdc = sdc_index(state)
+
+    def row(full, own):  # (P, M), (N, Q) -> (N, Q) with the SDC's row replaced
+        line = full[route]
+        line = line[:length] if line.shape[-1] >= length else jnp.pad(line, (0, length - line.shape[-1]))
+        return own.at[sdc].set(jnp.where(has_route, line.astype(own.dtype), own[sdc]))
+
+    names = ("x", "y", "z", "ids", "valid", "arc_length")
+    updated = {name: row(getattr(paths, name), getattr(agents, name)) for name in names}
+    on_route = agents.on_route.at[sdc].set(has_route | agents.on_route[sdc])
+    return state.replace(agent_paths=agents.replace(**updated, on_route=on_route))

@@ -1,0 +1,329 @@
+"""`SelfPlayEnv`: one shared policy drives the SDC and up to K - 1 controllable agents of every scene.
+
+One environment with an agents axis (docs/selfplay.md). Each scene picks its agents at reset: the SDC, then
+the controllable objects present at the first policy step with a path, nearest the SDC first
+(`choose_agents`). Every agent sees the scene through `agent_view` -- it is "the SDC" and its own path is the
+route -- so the observation, the metrics, the reward and the terminations are the SDC's own functions, vmapped
+over agents. The learner sees a flat batch of B * K rows (scene-major) with `active` marking the rows that
+are real agents still acting; everything else (empty slots, agents already finished) is masked.
+
+An agent's episode ends when it collides, leaves the road or runs a red light (as `EnvConfig.terminate_on`),
+when it reaches its goal (within `goal_radius_m` of its last logged position: GPUDrive's goal-reaching), or when
+the scene reaches its time limit. A goal reacher leaves the scene; a crashed agent leaves it too
+(`crashed="remove"`: others stop seeing it) or stays where it stopped as a still obstacle (`"obstacle"`).
+Objects that are not agents replay the log. A scene restarts on the next pool scenario when no agent is
+left acting or at its time limit; its slots then hold new agents.
+
+Everything is pure and jittable; `reset` and `step` take the scenario pool as an argument like `LearningEnv`'s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from vmax_sim.datatypes import Action, SimulatorState, update_timestep
+from vmax_sim.env.agent_view import agent_view, choose_agents, with_sdc_route
+from vmax_sim.env.config import EnvConfig
+from vmax_sim.env.environment import Environment
+from vmax_sim.env.learning import EPISODE_FLAGS, TERMINATION_METRICS, _has_noise
+from vmax_sim.env.metrics_adapter import reference_arcs, sdc_index, sdc_observation, step_inputs
+from vmax_sim.metrics import MetricsConfig, shared_queries, step_metrics
+from vmax_sim.observation import Observation, ObservationConfig
+from vmax_sim.rewards import RewardConfig, check_reward_config, compute_reward
+
+CRASHED_CHOICES = ("remove", "obstacle")
+AGENT_FLAGS = (*EPISODE_FLAGS, "goal_reached")  # per-agent episode indicators
+
+
+@dataclasses.dataclass(frozen=True)
+class SelfPlayConfig:
+    max_agents: int = 8  # K: agents driven per scene, the SDC included (1: the SDC alone)
+    goal_radius_m: float = 2.0  # an agent reaches its goal within this distance of its last logged position
+    goal_reward: float = 1.0  # added to the reward of the step an agent reaches its goal
+    crashed: str = "remove"  # "remove": a crashed agent leaves the scene; "obstacle": it stays, standing still
+
+    def __post_init__(self) -> None:
+        if self.max_agents < 1:
+            raise ValueError(f"selfplay.max_agents must be at least 1, got {self.max_agents}")
+        if not self.goal_radius_m > 0:
+            raise ValueError(f"selfplay.goal_radius_m must be positive, got {self.goal_radius_m}")
+        if self.crashed not in CRASHED_CHOICES:
+            raise ValueError(f"selfplay.crashed must be one of {CRASHED_CHOICES}, got {self.crashed!r}")
+
+
+@struct.dataclass
+class SelfPlayState:
+    sim: SimulatorState  # (B, ...) the running scenes (agent_paths with the SDC's route in its row)
+    slots: jax.Array  # (B, K) int32, object slot of each agent
+    present: jax.Array  # (B, K) bool, the slot holds an agent this episode
+    active: jax.Array  # (B, K) bool, the agent still acts
+    gone: jax.Array  # (B, N) bool, objects taken out of the scene (finished agents)
+    still: jax.Array  # (B, N) bool, crashed agents kept as standing obstacles
+    goal_xy: jax.Array  # (B, K, 2) float32, each agent's last logged position in the episode
+    arcs: jax.Array  # (B, K, 1, 2) float32, logged start / end arcs along each agent's own path
+    metrics: dict  # name -> (B, K) float32, each agent's step metrics now
+    observation: Observation  # (B * K, ...) the policy's input now (flat, scene-major)
+    episode_return: jax.Array  # (B, K) float32
+    episode_length: jax.Array  # (B, K) int32
+    episode_flags: dict  # name -> (B, K) bool, AGENT_FLAGS seen so far
+    next_scenario: jax.Array  # () int32
+    key: jax.Array
+
+
+@struct.dataclass
+class AgentStepOutput:
+    """One step of every agent slot, flat (B * K) like the learner's batch; the fields `StepOutput` has mean
+    the same, per agent. Rows where `active` is False carry no experience (zeros, never done)."""
+
+    observation: Observation  # (BK, ...) before the step
+    action: jax.Array  # (BK, A) float32 in [-1, 1]
+    expert_action: jax.Array  # (BK, A) zeros (self-play has no expert labels)
+    reward: jax.Array  # (BK,) float32
+    terminated: jax.Array  # (BK,) bool, crash, off-road, red light or goal reached
+    truncated: jax.Array  # (BK,) bool, the scene's time limit (and not terminated)
+    next_observation: Observation  # (BK, ...) after the step, before any restart
+    episode_return: jax.Array  # (BK,) float32 where the agent's episode ended, else 0
+    episode_length: jax.Array  # (BK,) int32, likewise
+    episode_flags: dict  # name -> (BK,) bool, AGENT_FLAGS, likewise
+    episode_progress: jax.Array  # (BK,) float32, progress ratio along its path where done
+    active: jax.Array  # (BK,) bool, the row is an agent acting at this step
+    scene_done: jax.Array  # (B,) bool, the scene restarts after this step
+
+    @property
+    def done(self) -> jax.Array:
+        return self.terminated | self.truncated
+
+
+@dataclasses.dataclass(frozen=True)
+class SelfPlayEnv:
+    """Batched self-play environment (see the module docstring). Same batched API as `LearningEnv`, with
+    B * K learner rows for B scenes."""
+
+    env_config: EnvConfig = EnvConfig(controlled="controllable")
+    obs_config: ObservationConfig = ObservationConfig()
+    reward_config: RewardConfig = RewardConfig()
+    metrics_config: MetricsConfig = MetricsConfig()
+    selfplay: SelfPlayConfig = SelfPlayConfig()
+    action_repeat: int = 1
+    expert_labels: bool = False  # no log-following labels: kept for LearningEnv's interface
+
+    def __post_init__(self) -> None:
+        unknown = set(self.env_config.terminate_on) - set(TERMINATION_METRICS)
+        if unknown:
+            raise ValueError(f"EnvConfig.terminate_on: unknown {sorted(unknown)}; choose among "
+                             f"{sorted(TERMINATION_METRICS)}")
+        check_reward_config(self.reward_config)
+        if self.action_repeat < 1:
+            raise ValueError(f"action_repeat must be at least 1, got {self.action_repeat}")
+        config = dataclasses.replace(self.env_config, normalize_actions=True, controlled="controllable")
+        object.__setattr__(self, "env_config", config)
+        object.__setattr__(self, "core", Environment(config))
+
+    @property
+    def action_dim(self) -> int:
+        return self.core.action_dim
+
+    @property
+    def agents_per_scene(self) -> int:
+        return self.selfplay.max_agents
+
+    # ------------------------------------------------------------------ one agent of one scene
+
+    def _measure(self, sim: SimulatorState, slot: jax.Array, arcs: jax.Array, key: jax.Array | None):
+        """The agent's step metrics and observation now."""
+        view = agent_view(sim, slot)
+        inputs = step_inputs(view, arcs)
+        shared = shared_queries(inputs, self.metrics_config)
+        metrics = step_metrics(view.map_index, inputs, self.metrics_config, shared)
+        noise_key = key if key is not None and _has_noise(self.obs_config) else None
+        return metrics, sdc_observation(view, shared, self.obs_config, noise_key)
+
+    def _goal(self, sim: SimulatorState, slot: jax.Array) -> jax.Array:
+        """The agent's last logged position within the episode window. (2,)"""
+        log = sim.log_trajectory
+        steps = jnp.arange(log.valid.shape[-1])
+        last = jnp.max(jnp.where(log.valid[slot] & (steps <= self.env_config.last_timestep), steps, 0))
+        return jnp.stack([log.x[slot, last], log.y[slot, last]])
+
+    # ------------------------------------------------------------------ one scene (vmapped below)
+
+    def _start(self, sim: SimulatorState, key: jax.Array):
+        """Reset one scene: its agents, their goals, arcs, metrics and observations."""
+        del key  # the start is deterministic (observation noise starts at the first step)
+        k = self.selfplay.max_agents
+        sim = with_sdc_route(self.core.reset(sim))
+        first = self.env_config.first_policy_timestep
+        others, others_valid = choose_agents(sim, max(k - 1, 1), first)
+        sdc = sdc_index(sim)
+        slots = jnp.concatenate([sdc[None], others[:k - 1]]).astype(jnp.int32)
+        has_route = jnp.any(sim.agent_paths.valid[sdc])
+        present = jnp.concatenate([has_route[None], others_valid[:k - 1]])
+        arcs = jax.vmap(lambda slot: reference_arcs(agent_view(sim, slot), self.env_config))(slots)
+        goals = jax.vmap(lambda slot: self._goal(sim, slot))(slots)
+        metrics, observation = jax.vmap(lambda slot, a: self._measure(sim, slot, a, None))(slots, arcs)
+        # an agent that starts overlapping another object or off the road (a car logged on a driveway, a box
+        # touching its neighbour's) would end its episode at its first step, one that starts at its goal (logged
+        # standing still) has nowhere to go: they replay their logs instead
+        start = sim.current_sim_trajectory
+        to_goal = jnp.hypot(start.x[slots, 0] - goals[:, 0], start.y[slots, 0] - goals[:, 1])
+        present = (present & (metrics["overlap"] < 0.5) & (metrics["offroad"] < 0.5)
+                   & (to_goal >= self.selfplay.goal_radius_m))
+        is_agent = jnp.zeros(sim.num_objects, bool).at[jnp.where(present, slots, sim.num_objects)].set(
+            True, mode="drop")
+        sim = sim.replace(object_metadata=sim.object_metadata.replace(is_controlled=is_agent, max_controlled=k))
+        none = jnp.zeros(sim.num_objects, bool)
+        return sim, slots, present, present, none, none, goals, arcs, metrics, observation
+
+    def _move(self, sim: SimulatorState, slots: jax.Array, acting: jax.Array, action: jax.Array,
+              gone: jax.Array, still: jax.Array) -> SimulatorState:
+        """One simulator step: acting agents by their actions (K, A), gone objects stay out, still ones stay put."""
+        num = sim.num_objects
+        target = jnp.where(acting, slots, num)
+        data = jnp.zeros((num, self.action_dim), jnp.float32).at[target].set(action, mode="drop")
+        valid = jnp.zeros((num, 1), bool).at[target, 0].set(True, mode="drop")
+        before = sim.current_sim_trajectory
+        sim = self.core.step(sim, Action(data=data, valid=valid))
+        now = sim.current_sim_trajectory
+        standing = before.replace(vel_x=jnp.zeros_like(before.vel_x), vel_y=jnp.zeros_like(before.vel_y))
+        now = jax.tree.map(lambda held, moved: jnp.where(still[:, None], held.astype(moved.dtype), moved),
+                           standing, now)
+        now = now.replace(valid=now.valid & ~gone[:, None])
+        return sim.replace(sim_trajectory=update_timestep(sim.sim_trajectory, sim.timestep, now), current_sim=now)
+
+    def _substep(self, parts, slots, arcs, goals, action):
+        """One simulator step of the held actions: agents still acting move, score and may finish."""
+        sim, acting, gone, still, metrics, reward, terminated, goal, flags = parts
+        sim = self._move(sim, slots, acting, action, gone, still)
+        new_metrics = jax.vmap(lambda slot, a: self._measure(sim, slot, a, None)[0])(slots, arcs)
+        crashed = jnp.zeros_like(acting)
+        for name in self.env_config.terminate_on:
+            crashed = crashed | (new_metrics[TERMINATION_METRICS[name]] > 0.5)
+        crashed = acting & crashed
+        now = sim.current_sim_trajectory
+        xy = jnp.stack([now.x[slots, 0], now.y[slots, 0]], -1)  # (K, 2)
+        distance = jnp.hypot(xy[:, 0] - goals[:, 0], xy[:, 1] - goals[:, 1])
+        reached = acting & ~crashed & (distance < self.selfplay.goal_radius_m)
+        step_reward = compute_reward(new_metrics, metrics, self.reward_config, self.metrics_config)
+        step_reward = step_reward + self.selfplay.goal_reward * reached
+        reward = reward + jnp.where(acting, step_reward, 0.0)
+        flags = {name: flags[name] | (acting & (new_metrics[name] > 0.5)) for name in EPISODE_FLAGS}
+        metrics = jax.tree.map(lambda n, o: jnp.where(acting, n, o), new_metrics, metrics)
+        finished = jnp.where(acting, slots, sim.num_objects)
+        leaving = crashed if self.selfplay.crashed == "remove" else jnp.zeros_like(crashed)
+        gone = gone.at[jnp.where(reached | leaving, finished, sim.num_objects)].set(True, mode="drop")
+        still = still.at[jnp.where(crashed & ~leaving, finished, sim.num_objects)].set(True, mode="drop")
+        acting = acting & ~crashed & ~reached
+        return (sim, acting, gone, still, metrics, reward, terminated | crashed | reached, goal | reached, flags)
+
+    def _advance(self, sim, slots, active, gone, still, goals, arcs, metrics, action, key):
+        """One policy step of one scene: actions (K, A) held for `action_repeat` simulator steps, or until the
+        scene's time limit."""
+        zeros = jnp.zeros_like(active)
+        flags = {name: zeros for name in EPISODE_FLAGS}
+        parts = (sim, active, gone, still, metrics, jnp.zeros(active.shape, jnp.float32), zeros, zeros, flags)
+        truncated_scene = jnp.zeros((), bool)
+        for _ in range(self.action_repeat):  # unrolled: repeats are few
+            running = ~truncated_scene
+            stepped = self._substep(parts, slots, arcs, goals, action)
+            keep = _selector(running)
+            old_sim, new_sim = parts[0], stepped[0]
+            # only the simulated trajectory and the timestep change: never select (copy) the map index
+            sim = old_sim.replace(sim_trajectory=keep(new_sim.sim_trajectory, old_sim.sim_trajectory),
+                                  timestep=keep(new_sim.timestep, old_sim.timestep),
+                                  current_sim=keep(new_sim.current_sim, old_sim.current_sim))
+            parts = (sim, *keep(stepped[1:], parts[1:]))
+            truncated_scene = truncated_scene | (sim.timestep >= self.env_config.last_timestep) | sim.is_done
+        sim, acting, gone, still, metrics, reward, terminated, goal, flags = parts
+        flags = {**flags, "goal_reached": goal}
+        truncated = active & ~terminated & truncated_scene
+        keys = jax.random.split(key, slots.shape[0])
+        observation = jax.vmap(lambda slot, a, k: self._measure(sim, slot, a, k)[1])(slots, arcs, keys)
+        scene_done = truncated_scene | ~jnp.any(acting)
+        return sim, acting, gone, still, metrics, reward, terminated, truncated, flags, observation, scene_done
+
+    # ------------------------------------------------------------------ batched API
+
+    def reset(self, pool: SimulatorState, batch_size: int, key: jax.Array) -> SelfPlayState:
+        """Starts `batch_size` scenes on pool scenarios 0..B-1 (cycled when the pool is smaller)."""
+        pool_size = pool.timestep.shape[0]
+        scenes = jax.tree.map(lambda a: a[jnp.arange(batch_size) % pool_size], pool)
+        parts = jax.vmap(self._start)(scenes, jax.random.split(key, batch_size))
+        sim, slots, present, active, gone, still, goals, arcs, metrics, observation = parts
+        shape = slots.shape
+        return SelfPlayState(
+            sim=sim, slots=slots, present=present, active=active, gone=gone, still=still, goal_xy=goals,
+            arcs=arcs, metrics=metrics, observation=_flat(observation), episode_return=jnp.zeros(shape),
+            episode_length=jnp.zeros(shape, jnp.int32), episode_flags={n: jnp.zeros(shape, bool) for n in AGENT_FLAGS},
+            next_scenario=jnp.asarray(batch_size % pool_size, jnp.int32), key=key)
+
+    def step(self, state: SelfPlayState, action: jax.Array, pool: SimulatorState
+             ) -> tuple[SelfPlayState, AgentStepOutput]:
+        """Applies actions (B * K, A) in [-1, 1]; finished scenes restart on the next pool scenarios."""
+        batch, k = state.slots.shape
+        action = jnp.clip(action, -1.0, 1.0).reshape(batch, k, -1)
+        key, step_key = jax.random.split(state.key)
+        outs = jax.vmap(self._advance)(state.sim, state.slots, state.active, state.gone, state.still, state.goal_xy,
+                                       state.arcs, state.metrics, action, jax.random.split(step_key, batch))
+        sim, acting, gone, still, metrics, reward, terminated, truncated, seen, next_obs, scene_done = outs
+        active = state.active
+        done = terminated | truncated
+        episode_return = state.episode_return + reward
+        episode_length = state.episode_length + active.astype(jnp.int32)
+        flags = {name: state.episode_flags[name] | seen[name] for name in AGENT_FLAGS}
+        output = AgentStepOutput(
+            observation=state.observation, action=action.reshape(batch * k, -1),
+            expert_action=jnp.zeros((batch * k, action.shape[-1])), reward=_flat(reward),
+            terminated=_flat(terminated), truncated=_flat(truncated), next_observation=_flat(next_obs),
+            episode_return=_flat(jnp.where(done, episode_return, 0.0)),
+            episode_length=_flat(jnp.where(done, episode_length, 0)),
+            episode_flags={name: _flat(flag & done) for name, flag in flags.items()},
+            episode_progress=_flat(jnp.where(done, metrics["progress_ratio"], 0.0)),
+            active=_flat(active), scene_done=scene_done)
+        running = state.replace(
+            sim=sim, active=acting, gone=gone, still=still, metrics=metrics, observation=_flat(next_obs),
+            episode_return=jnp.where(done, 0.0, episode_return), episode_length=jnp.where(done, 0, episode_length),
+            episode_flags={name: flag & ~done for name, flag in flags.items()}, key=key)
+        return self._restart_finished(running, scene_done, pool), output
+
+    def _restart_finished(self, state: SelfPlayState, done: jax.Array, pool: SimulatorState) -> SelfPlayState:
+        """Finished scenes restart on the next pool scenarios, one at a time, written in place (as LearningEnv's)."""
+        pool_size = pool.timestep.shape[0]
+        batch, k = state.slots.shape
+        rows = jnp.nonzero(done, size=done.shape[0], fill_value=0)[0]
+        num_done = jnp.sum(done).astype(jnp.int32)
+
+        def restart_one(i, parts):
+            scenario = (state.next_scenario + i) % pool_size
+            fresh = self._start(jax.tree.map(lambda a: a[scenario], pool), state.key)
+            scene_parts, observation = parts
+            *fresh_scene, fresh_obs = fresh
+            scene_parts = jax.tree.map(
+                lambda c, f: jax.lax.dynamic_update_index_in_dim(c, f.astype(c.dtype), rows[i], 0),
+                scene_parts, tuple(fresh_scene))
+            observation = jax.tree.map(
+                lambda c, f: jax.lax.dynamic_update_slice_in_dim(c, f.astype(c.dtype), rows[i] * k, 0),
+                observation, fresh_obs)
+            return scene_parts, observation
+
+        kept = ((state.sim, state.slots, state.present, state.active, state.gone, state.still, state.goal_xy,
+                 state.arcs, state.metrics), state.observation)
+        scene_parts, observation = jax.lax.cond(
+            num_done > 0, lambda parts: jax.lax.fori_loop(0, num_done, restart_one, parts), lambda parts: parts, kept)
+        sim, slots, present, active, gone, still, goals, arcs, metrics = scene_parts
+        return state.replace(sim=sim, slots=slots, present=present, active=active, gone=gone, still=still,
+                             goal_xy=goals, arcs=arcs, metrics=metrics, observation=observation,
+                             next_scenario=((state.next_scenario + num_done) % pool_size).astype(jnp.int32))
+
+
+def _selector(condition: jax.Array):
+    """(new, old) -> new where `condition` (a scalar), else old, leaf by leaf."""
+    return lambda new, old: jax.tree.map(lambda n, o: jnp.where(condition, n, o), new, old)
+
+
+def _flat(tree):
+    """(B, K, ...) -> (B * K, ...) leaf by leaf."""
+    return jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), tree)
