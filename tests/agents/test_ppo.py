@@ -108,10 +108,26 @@ def test_first_minibatch_ratio_is_one(setup):
     loss = L.make_loss(make_networks(CONFIG, lambda: toy.ToyEncoder(8), 1), CONFIG)
     flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), rollout)
     batch = L.PPOBatch(obs=flat.obs, action=flat.action, log_prob=flat.log_prob, value=flat.value,
-                       advantage=jnp.ones(48), target=flat.value)
+                       advantage=jnp.ones(48), target=flat.value, mask=jnp.ones(48))
     _, metrics = jax.jit(loss)(state.params, batch, jax.random.key(0))
     assert float(metrics["clip_fraction"]) == 0.0
     assert abs(float(metrics["approx_kl"])) < 1e-6
+
+
+def test_masked_rows_do_not_change_the_update(setup):
+    """Self-play pads its flat batch with empty or finished agent slots (mask 0): whatever those rows hold, the
+    update is the one of the real rows alone."""
+    learner, state, rollout = setup
+    mask = (jnp.arange(rollout.reward.shape[1]) % 2 == 0).astype(jnp.float32)[None].repeat(rollout.reward.shape[0], 0)
+    bootstrap = learner.value(state.params, jax.tree.map(lambda x: x[-1], rollout.next_obs))
+    update = jax.jit(learner.update)
+    masked = rollout.replace(mask=mask)
+    garbage = masked.replace(reward=jnp.where(mask > 0, rollout.reward, 1e3),
+                             action=jnp.where(mask[..., None] > 0, rollout.action, -0.99))
+    first, metrics = update(state, masked, jax.random.key(3), bootstrap_value=bootstrap)
+    second, metrics_garbage = update(state, garbage, jax.random.key(3), bootstrap_value=bootstrap)
+    toy.assert_trees_equal(first.params, second.params)
+    assert float(metrics["value_loss"]) == float(metrics_garbage["value_loss"])
 
 
 def test_update_deterministic_and_no_retrace(setup):

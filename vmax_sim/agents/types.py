@@ -25,7 +25,7 @@ class Transition:
     `discount` is 0 when the episode terminated at this step and 1 otherwise: a time-limit truncation
     keeps discount 1 and `next_obs` holds the true last state (not the auto-reset one), so targets
     bootstrap through it. The on-policy fields are ignored by the off-policy learners; `make` fills
-    any field not given with zeros (False for masks), so one structure serves every learner.
+    any field not given with zeros (False for flags, 1 for `mask`), so one structure serves every learner.
     """
 
     obs: Observation  # pytree, leaves (B, ...) or (T, B, ...)
@@ -38,10 +38,13 @@ class Transition:
     value: jax.Array  # (B,) behaviour value estimate V(obs) (on-policy data)
     truncated: jax.Array  # (B,) bool, episode cut by the time limit at this step
     done: jax.Array  # (B,) bool, episode ended at this step (terminated or truncated)
+    # (B,) float32, 1 where the row is real experience: 0 for an agent slot that is empty or whose agent already
+    # finished (self-play's flat envs x agents batch); the learners weight their losses by it
+    mask: jax.Array
 
     @classmethod
     def make(cls, obs, action, reward, discount, next_obs, expert_action=None, log_prob=None, value=None,
-             truncated=None, done=None) -> Transition:
+             truncated=None, done=None, mask=None) -> Transition:
         """A Transition whose optional fields default to zeros shaped like `reward` / `action`."""
         reward = jnp.asarray(reward, jnp.float32)
         action = jnp.asarray(action, jnp.float32)
@@ -55,7 +58,8 @@ class Transition:
                    log_prob=or_zeros(log_prob, reward, jnp.float32),
                    value=or_zeros(value, reward, jnp.float32),
                    truncated=or_zeros(truncated, reward, bool),
-                   done=or_zeros(done, reward, bool))
+                   done=or_zeros(done, reward, bool),
+                   mask=jnp.ones(reward.shape, jnp.float32) if mask is None else jnp.asarray(mask, jnp.float32))
 
 
 class Learner(NamedTuple):

@@ -80,7 +80,8 @@ def make_learner(config: PPOConfig, encoder_factory: EncoderFactory, action_dim:
         advantages, returns = advantages_and_returns(state.params, rollout, bootstrap_value)
         data = ppo_losses.PPOBatch(obs=_flatten_time(rollout.obs), action=_flatten_time(rollout.action),
                                    log_prob=rollout.log_prob.reshape(-1), value=rollout.value.reshape(-1),
-                                   advantage=advantages.reshape(-1), target=returns.reshape(-1))
+                                   advantage=advantages.reshape(-1), target=returns.reshape(-1),
+                                   mask=rollout.mask.reshape(-1))
 
         def epoch(carry, epoch_key):
             perm_key, loss_key = jax.random.split(epoch_key)
@@ -93,9 +94,14 @@ def make_learner(config: PPOConfig, encoder_factory: EncoderFactory, action_dim:
         (params, opt_state), metrics = jax.lax.scan(epoch, (state.params, state.opt_state),
                                                     jax.random.split(key, config.num_epochs))
         metrics = jax.tree.map(jnp.mean, metrics)  # over epochs and minibatches
-        residual_var = jnp.var(returns - rollout.value)
-        metrics.update(advantage_mean=scalar(jnp.mean(advantages)), return_mean=scalar(jnp.mean(returns)),
-                       explained_variance=scalar(1.0 - residual_var / (jnp.var(returns) + 1e-8)))
+        mask = rollout.mask
+        return_mean = ppo_losses.masked_mean(returns, mask)
+        residual = returns - rollout.value
+        residual_var = ppo_losses.masked_mean(jnp.square(residual - ppo_losses.masked_mean(residual, mask)), mask)
+        return_var = ppo_losses.masked_mean(jnp.square(returns - return_mean), mask)
+        metrics.update(advantage_mean=scalar(ppo_losses.masked_mean(advantages, mask)),
+                       return_mean=scalar(return_mean),
+                       explained_variance=scalar(1.0 - residual_var / (return_var + 1e-8)))
         return PPOTrainState(params=params, opt_state=opt_state, step=state.step + 1), metrics
 
     act, policy_act_with_info = make_act_fns(lambda params, obs: networks.policy.apply(params.policy, obs))

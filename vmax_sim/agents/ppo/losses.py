@@ -53,33 +53,42 @@ def compute_gae(rewards: jax.Array, values: jax.Array, next_values: jax.Array, d
     return advantages, advantages + values
 
 
-def normalize(x: jax.Array, eps: float = 1e-8) -> jax.Array:
-    """(x - mean) / (std + eps) over all entries."""
-    return (x - jnp.mean(x)) / (jnp.std(x) + eps)
+def masked_mean(x: jax.Array, mask: jax.Array | None = None) -> jax.Array:
+    """Mean of x over the entries where mask (same shape, 0 / 1) is 1; the plain mean without a mask."""
+    if mask is None:
+        return jnp.mean(x)
+    return jnp.sum(x * mask) / jnp.maximum(jnp.sum(mask), 1.0)
+
+
+def normalize(x: jax.Array, eps: float = 1e-8, mask: jax.Array | None = None) -> jax.Array:
+    """(x - mean) / (std + eps), mean and std over all entries (the masked ones with a mask)."""
+    mean = masked_mean(x, mask)
+    std = jnp.sqrt(masked_mean(jnp.square(x - mean), mask))
+    return (x - mean) / (std + eps)
 
 
 def clipped_surrogate_loss(log_prob: jax.Array, old_log_prob: jax.Array, advantages: jax.Array,
-                           clip_eps: float) -> tuple[jax.Array, jax.Array]:
+                           clip_eps: float, mask: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
     """(L_clip (), fraction of entries whose ratio lies outside [1 - eps, 1 + eps] ()), inputs (N,)."""
     ratio = jnp.exp(log_prob - old_log_prob)
     surrogate = jnp.minimum(ratio * advantages, jnp.clip(ratio, 1.0 - clip_eps, 1.0 + clip_eps) * advantages)
-    return -jnp.mean(surrogate), jnp.mean((jnp.abs(ratio - 1.0) > clip_eps).astype(jnp.float32))
+    return -masked_mean(surrogate, mask), masked_mean((jnp.abs(ratio - 1.0) > clip_eps).astype(jnp.float32), mask)
 
 
 def value_loss(values: jax.Array, returns: jax.Array, old_values: jax.Array | None = None,
-               clip_eps: float | None = None) -> jax.Array:
+               clip_eps: float | None = None, mask: jax.Array | None = None) -> jax.Array:
     """1/2 mean squared error (N,) -> (); with clip_eps, the pessimistic max with the clipped prediction."""
     loss = jnp.square(values - returns)
     if clip_eps is not None:
         clipped = old_values + jnp.clip(values - old_values, -clip_eps, clip_eps)
         loss = jnp.maximum(loss, jnp.square(clipped - returns))
-    return 0.5 * jnp.mean(loss)
+    return 0.5 * masked_mean(loss, mask)
 
 
-def approx_kl(log_prob: jax.Array, old_log_prob: jax.Array) -> jax.Array:
+def approx_kl(log_prob: jax.Array, old_log_prob: jax.Array, mask: jax.Array | None = None) -> jax.Array:
     """KL(pi_old || pi) estimate mean((ratio - 1) - log ratio) >= 0, (N,) -> ()."""
     log_ratio = log_prob - old_log_prob
-    return jnp.mean(jnp.expm1(log_ratio) - log_ratio)
+    return masked_mean(jnp.expm1(log_ratio) - log_ratio, mask)
 
 
 @flax.struct.dataclass
@@ -92,6 +101,7 @@ class PPOBatch:
     value: jax.Array  # (N,) behaviour V(s)
     advantage: jax.Array  # (N,) GAE advantage (not normalised)
     target: jax.Array  # (N,) GAE return, the value target
+    mask: jax.Array  # (N,) float32, 1 for real experience, 0 for padding rows (empty or finished agent slots)
 
 
 def make_loss(networks: PPONetworks, config: PPOConfig) -> Callable[..., tuple[jax.Array, Metrics]]:
@@ -100,19 +110,21 @@ def make_loss(networks: PPONetworks, config: PPOConfig) -> Callable[..., tuple[j
     def loss(params: PPOParams, batch: PPOBatch, key: jax.Array):
         dist = networks.policy.apply(params.policy, batch.obs)
         log_prob = D.log_prob(dist, batch.action)
-        advantages = normalize(batch.advantage) if config.normalize_advantages else batch.advantage
-        policy_loss, clip_fraction = clipped_surrogate_loss(log_prob, batch.log_prob, advantages, config.clip_eps)
+        mask = batch.mask
+        advantages = normalize(batch.advantage, mask=mask) if config.normalize_advantages else batch.advantage
+        policy_loss, clip_fraction = clipped_surrogate_loss(log_prob, batch.log_prob, advantages, config.clip_eps,
+                                                            mask)
         values = networks.value.apply(params.value, batch.obs)
-        v_loss = value_loss(values, batch.target, batch.value, config.value_clip_eps)
+        v_loss = value_loss(values, batch.target, batch.value, config.value_clip_eps, mask)
         if config.entropy_estimate == "gaussian":
-            entropy = jnp.mean(D.entropy(dist))
+            entropy = masked_mean(D.entropy(dist), mask)
         else:
-            entropy = jnp.mean(D.sample_entropy(dist, key))
+            entropy = masked_mean(D.sample_entropy(dist, key), mask)
         total = policy_loss + config.value_coef * v_loss - config.entropy_coef * entropy
         metrics = {"loss": scalar(total), "policy_loss": scalar(policy_loss), "value_loss": scalar(v_loss),
                    "entropy": scalar(entropy), "clip_fraction": scalar(clip_fraction),
-                   "approx_kl": scalar(approx_kl(log_prob, batch.log_prob)),
-                   "policy_std": scalar(jnp.mean(jnp.exp(dist.log_std)))}
+                   "approx_kl": scalar(approx_kl(log_prob, batch.log_prob, mask)),
+                   "policy_std": scalar(masked_mean(jnp.mean(jnp.exp(dist.log_std), axis=-1), mask))}
         return total, metrics
 
     return loss
