@@ -111,7 +111,8 @@ def _check_data(specs, deep: bool, skip: bool, quiet: bool) -> None:
 @main.command(context_settings={"ignore_unknown_options": False})
 @click.option("--preset", default="sac", show_default=True,
               help="Words joined by dashes: algorithm (sac, ppo, bc, bc_sac), encoder (none, mlp, lq, lqh, mtr, "
-                   "wayformer), reward (safety, navigation, behavior), 'paper' for the paper's hyper-parameters.")
+                   "wayformer), reward (safety, navigation, behavior), 'paper' for the paper's hyper-parameters, "
+                   "'selfplay' (ppo-selfplay: one policy drives the SDC and every controllable agent).")
 @click.option("--data", default=None, help="Training shards (default: the embedded synthetic split).")
 @click.option("--eval-data", default=None, help="Held-out shards for evaluation (default: synthetic, disjoint seeds).")
 @click.option("--out", default=None, type=click.Path(file_okay=False),

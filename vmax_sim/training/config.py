@@ -3,7 +3,8 @@
 A preset name joins up to four words with dashes, in any order: an algorithm (sac, ppo, bc, bc_sac),
 an encoder (none, mlp, lq, lqh, mtr, wayformer), a reward preset (safety, navigation, behavior) and
 `paper` (the algorithm's hyper-parameters from the V-Max paper instead of this machine's defaults),
-e.g. `sac-lq-navigation` or `paper-sac-lq`. Overrides name a section and a field:
+e.g. `sac-lq-navigation` or `paper-sac-lq`; `selfplay` (`ppo-selfplay`) makes one PPO policy drive the SDC and
+the controllable agents of every scene. Overrides name a section and a field:
 `algo.learning_rate=3e-4 network.embed_dim=32 train.total_env_steps=50000 reward.preset=behavior`.
 """
 
@@ -19,6 +20,7 @@ from typing import Any
 from scenariomax import SyntheticKnobs
 from vmax_sim.agents import ALGORITHMS, get_config
 from vmax_sim.env.config import EnvConfig
+from vmax_sim.env.selfplay import SelfPlayConfig
 from vmax_sim.networks import ENCODER_NAMES, EncoderConfig
 from vmax_sim.observation import NoiseConfig, ObservationConfig
 from vmax_sim.rewards import REWARD_PRESETS, RewardConfig
@@ -94,14 +96,31 @@ class TrainConfig:
     reward: RewardConfig = RewardConfig()
     data: TrainDataConfig = TrainDataConfig()
     train: LoopConfig = LoopConfig()
+    # self-play settings, used when env.controlled == "controllable" (one policy drives the SDC and up to
+    # selfplay.max_agents - 1 controllable agents of each scene; vmax_sim.env.selfplay)
+    selfplay: SelfPlayConfig = SelfPlayConfig()
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
             raise ValueError(f"unknown algorithm {self.algo!r}; choose among {', '.join(ALGORITHMS)}")
+        if self.is_selfplay and self.algo != "ppo":
+            raise ValueError(f"self-play (env.controlled=controllable) trains with ppo, not {self.algo}")
+        if not isinstance(self.env.controlled, str):
+            raise ValueError("env.controlled must be sdc or controllable in training")
         if self.algo_config is None:
             object.__setattr__(self, "algo_config", get_config(self.algo, self.algo_preset))
         if self.env.max_num_objects != self.data.num_objects:
             object.__setattr__(self, "env", dataclasses.replace(self.env, max_num_objects=self.data.num_objects))
+
+    @property
+    def is_selfplay(self) -> bool:
+        """One policy drives every chosen agent (env.controlled=controllable), not the SDC alone."""
+        return self.env.controlled == "controllable"
+
+    @property
+    def agents_per_env(self) -> int:
+        """Learner rows per environment: selfplay.max_agents under self-play, else 1."""
+        return self.selfplay.max_agents if self.is_selfplay else 1
 
 
 def chunk_steps(config: TrainConfig) -> int:
@@ -130,22 +149,24 @@ def pool_refresh(config: TrainConfig) -> int:
     from vmax_sim.training.loop import env_steps_per_chunk
 
     # an env step holds its action for action_repeat simulator steps: episodes end action_repeat times sooner
-    per_chunk = env_steps_per_chunk(config.algo, config.algo_config, chunk_steps(config))
+    per_chunk = env_steps_per_chunk(config.algo, config.algo_config, chunk_steps(config), config.agents_per_env)
     simulator_steps = per_chunk * action_repeat(config)
     return int(min(config.train.pool_size, max(1, -(-simulator_steps // config.env.episode_length))))
 
 
-SECTIONS = ("algo", "network", "env", "obs", "reward", "data", "train")
+SECTIONS = ("algo", "network", "env", "obs", "reward", "data", "train", "selfplay")
 _SECTION_FIELD = {"algo": "algo_config", "network": "network", "env": "env", "obs": "obs", "reward": "reward",
-                  "data": "data", "train": "train"}
+                  "data": "data", "train": "train", "selfplay": "selfplay"}
 
 
 def preset_config(name: str = "sac") -> TrainConfig:
     """The TrainConfig of a preset name such as `sac-lq-navigation` (see the module docstring)."""
-    algo, encoder, reward, algo_preset = "sac", None, "navigation", "default"
+    algo, encoder, reward, algo_preset, selfplay = "sac", None, "navigation", "default", False
     for word in (w for w in name.lower().split("-") if w):
         if word in ALGORITHMS:
             algo = word
+        elif word == "selfplay":  # one shared policy drives the SDC and the controllable agents (ppo)
+            selfplay = True
         elif word in ENCODER_NAMES:
             encoder = word
         elif word in REWARD_PRESETS:
@@ -154,9 +175,29 @@ def preset_config(name: str = "sac") -> TrainConfig:
             algo_preset = word
         else:
             raise ValueError(f"unknown preset word {word!r} in {name!r}; use algorithms {', '.join(ALGORITHMS)}, "
-                             f"encoders {', '.join(ENCODER_NAMES)}, rewards {', '.join(REWARD_PRESETS)}, or paper")
+                             f"encoders {', '.join(ENCODER_NAMES)}, rewards {', '.join(REWARD_PRESETS)}, paper or "
+                             f"selfplay")
+    if selfplay:
+        named = [w for w in name.lower().split("-") if w in ALGORITHMS and w != "ppo"]
+        if named:
+            raise ValueError(f"self-play trains with ppo: {name!r} names {named[0]}")
+        return selfplay_config(encoder, reward, algo_preset)
     network = EncoderConfig(name=encoder or DEFAULT_ENCODER[algo])
     return TrainConfig(algo=algo, algo_preset=algo_preset, network=network, reward=RewardConfig(preset=reward))
+
+
+def selfplay_config(encoder: str | None, reward: str, algo_preset: str) -> TrainConfig:
+    """The `ppo-selfplay` preset: PPO whose rows are every agent of SELFPLAY_ENVS scenes (docs/selfplay.md)."""
+    algo_config = get_config("ppo", algo_preset)
+    if algo_preset == "default":
+        algo_config = dataclasses.replace(algo_config, num_envs=SELFPLAY_ENVS)
+    return TrainConfig(algo="ppo", algo_preset=algo_preset, algo_config=algo_config,
+                       network=EncoderConfig(name=encoder or DEFAULT_ENCODER["ppo"]),
+                       env=EnvConfig(controlled="controllable"), reward=RewardConfig(preset=reward))
+
+
+# scenes stepped at once under self-play: with 8 agent slots each, 64 learner rows (the SDC-only ppo has 16)
+SELFPLAY_ENVS = 8
 
 
 # per algorithm, what learns best per minute on this CPU (docs/learning.md): the MLP encoder learns as fast as LQ
@@ -306,4 +347,5 @@ def config_from_dict(values: dict) -> TrainConfig:
         obs=dataclasses.replace(_from_dict(ObservationConfig, obs_values), noise=noise),
         reward=_from_dict(RewardConfig, values.get("reward", {})),
         data=_from_dict(TrainDataConfig, values.get("data", {})),
-        train=_from_dict(LoopConfig, values.get("train", {})))
+        train=_from_dict(LoopConfig, values.get("train", {})),
+        selfplay=_from_dict(SelfPlayConfig, values.get("selfplay", {})))

@@ -21,7 +21,8 @@ from flax import struct
 
 from vmax_sim.agents import Learner, Transition
 from vmax_sim.datatypes import SimulatorState
-from vmax_sim.env.learning import EPISODE_FLAGS, LearningEnv, LearningState, StepOutput
+from vmax_sim.env.learning import LearningEnv, LearningState, StepOutput
+from vmax_sim.env.selfplay import AgentStepOutput, SelfPlayEnv
 from vmax_sim.training.replay import TransitionReplay, replay_add, replay_sample
 
 OFF_POLICY = ("sac", "bc_sac", "bc")
@@ -37,24 +38,33 @@ class TrainCarry:
     env_steps: jax.Array  # () int32 (int64 would need x64), environment steps taken so far
 
 
-def transition_of(out: StepOutput, log_prob=None, value=None) -> Transition:
+def _active(out: StepOutput | AgentStepOutput) -> jax.Array | None:
+    """Which rows are real experience: self-play's agent rows that act (None: every row, the SDC-only env)."""
+    return getattr(out, "active", None)
+
+
+def transition_of(out: StepOutput | AgentStepOutput, log_prob=None, value=None) -> Transition:
     """The learner's Transition of one env step (discount 0 only where the episode terminated)."""
     return Transition.make(obs=out.observation, action=out.action, reward=out.reward,
                            discount=1.0 - out.terminated.astype(jnp.float32), next_obs=out.next_observation,
                            expert_action=out.expert_action, log_prob=log_prob, value=value,
-                           truncated=out.truncated, done=out.done)
+                           truncated=out.truncated, done=out.done, mask=_active(out))
 
 
-def episode_stats(out: StepOutput) -> dict[str, jax.Array]:
-    """Sums over the finished episodes of one step (divided by the count on the host)."""
+def episode_stats(out: StepOutput | AgentStepOutput) -> dict[str, jax.Array]:
+    """Sums over the finished episodes of one step (divided by the count on the host); under self-play an
+    episode is one agent's, and `agent_steps` counts the agents that acted."""
     done = out.done.astype(jnp.float32)
-    flags = {f"episode/{name}": jnp.sum(out.episode_flags[name].astype(jnp.float32)) for name in EPISODE_FLAGS}
+    flags = {f"episode/{name}": jnp.sum(flag.astype(jnp.float32)) for name, flag in out.episode_flags.items()}
     accurate = done * (1.0 - out.episode_flags["overlap"]) * (1.0 - out.episode_flags["offroad"]) * (
         1.0 - out.episode_flags["red_light"])
+    active = _active(out)
+    acting = jnp.ones(out.reward.shape, jnp.float32) if active is None else active.astype(jnp.float32)
     return {"episodes": jnp.sum(done), "episode/return": jnp.sum(out.episode_return),
             "episode/length": jnp.sum(out.episode_length.astype(jnp.float32)),
             "episode/accuracy": jnp.sum(accurate), "episode/progress_ratio": jnp.sum(out.episode_progress),
-            **flags, "reward_sum": jnp.sum(out.reward), "reward_count": jnp.asarray(out.reward.shape[0], jnp.float32)}
+            **flags, "reward_sum": jnp.sum(out.reward * acting), "reward_count": jnp.sum(acting),
+            "agent_steps": jnp.sum(acting)}
 
 
 def _sum_stats(stats: dict[str, jax.Array]) -> dict[str, jax.Array]:
@@ -119,14 +129,25 @@ def make_off_policy_chunk(env: LearningEnv, learner: Learner, algo: str, algo_co
     return chunk
 
 
-def unrolls_per_update(algo_config) -> int:
-    """PPO unrolls of num_envs environments collected per update (batch_size * num_minibatches sequences)."""
-    return max(1, (algo_config.batch_size * algo_config.num_minibatches) // algo_config.num_envs)
+def unrolls_per_update(algo_config, agents_per_env: int = 1) -> int:
+    """PPO unrolls of num_envs environments collected per update (batch_size * num_minibatches sequences; each
+    env gives `agents_per_env` sequences under self-play)."""
+    return max(1, (algo_config.batch_size * algo_config.num_minibatches) // (algo_config.num_envs * agents_per_env))
 
 
-def make_on_policy_chunk(env: LearningEnv, learner: Learner, algo_config, chunk_steps: int) -> Callable:
-    """PPO: each chunk step collects `unrolls_per_update` unrolls of `unroll_length` steps, then updates once."""
-    num_envs, unroll, num_unrolls = algo_config.num_envs, algo_config.unroll_length, unrolls_per_update(algo_config)
+def agents_per_env(env: LearningEnv | SelfPlayEnv) -> int:
+    """Learner rows per environment: 1, or self-play's agent slots per scene."""
+    return getattr(env, "agents_per_scene", 1)
+
+
+def make_on_policy_chunk(env: LearningEnv | SelfPlayEnv, learner: Learner, algo_config, chunk_steps: int
+                         ) -> Callable:
+    """PPO: each chunk step collects `unrolls_per_update` unrolls of `unroll_length` steps, then updates once.
+    Under self-play every (env, agent slot) pair is one sequence."""
+    agents = agents_per_env(env)
+    num_envs, unroll = algo_config.num_envs, algo_config.unroll_length
+    num_unrolls = unrolls_per_update(algo_config, agents)
+    rows = num_envs * agents
 
     def env_step(carry: tuple, pool: SimulatorState):
         params, env_state, key = carry
@@ -148,8 +169,8 @@ def make_on_policy_chunk(env: LearningEnv, learner: Learner, algo_config, chunk_
         params = learner.policy_params(carry.learner)
         (_, env_state, _), (rollouts, bootstrap, stats) = jax.lax.scan(
             lambda c, _: one_unroll(c, pool), (params, carry.env, rollout_key), None, length=num_unrolls)
-        # (U, T, E, ...) -> (T, U * E, ...): every (unroll, env) pair is one sequence
-        rollout = jax.tree.map(lambda a: jnp.swapaxes(a, 0, 1).reshape((unroll, num_unrolls * num_envs)
+        # (U, T, E, ...) -> (T, U * E, ...): every (unroll, env row) pair is one sequence
+        rollout = jax.tree.map(lambda a: jnp.swapaxes(a, 0, 1).reshape((unroll, num_unrolls * rows)
                                                                         + a.shape[3:]), rollouts)
         learner_state, metrics = learner.update(carry.learner, rollout, update_key,
                                                 bootstrap_value=bootstrap.reshape(-1))
@@ -168,7 +189,8 @@ def make_on_policy_chunk(env: LearningEnv, learner: Learner, algo_config, chunk_
     return chunk
 
 
-def env_steps_per_chunk(algo: str, algo_config, chunk_steps: int) -> int:
+def env_steps_per_chunk(algo: str, algo_config, chunk_steps: int, agents: int = 1) -> int:
+    """Environment (scene) steps of one chunk; `agents`: self-play's agent slots per scene."""
     if algo in OFF_POLICY:
         return algo_config.num_envs * chunk_steps
-    return algo_config.num_envs * algo_config.unroll_length * unrolls_per_update(algo_config) * chunk_steps
+    return algo_config.num_envs * algo_config.unroll_length * unrolls_per_update(algo_config, agents) * chunk_steps

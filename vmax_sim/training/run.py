@@ -34,6 +34,7 @@ from vmax_sim.agents import make_learner
 from vmax_sim.data import DataConfig, cache_dir
 from vmax_sim.data.mixture import SYNTHETIC, format_sources, parse_sources, source_probabilities
 from vmax_sim.env.learning import LearningEnv
+from vmax_sim.env.selfplay import SelfPlayEnv
 from vmax_sim.networks import make_encoder
 from vmax_sim.training.checkpoint import CheckpointStore
 from vmax_sim.training.config import (
@@ -88,9 +89,14 @@ def build_learner(config: TrainConfig, env: LearningEnv):
 
 @functools.lru_cache(maxsize=8)
 def components(config: TrainConfig):
-    """(LearningEnv, Learner) of a configuration, built once per process so jitted functions are reused."""
-    env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.algo in EXPERT_LABELLED,
-                      action_repeat=action_repeat(config))
+    """(LearningEnv or SelfPlayEnv, Learner) of a configuration, built once per process so jitted functions are
+    reused."""
+    if config.is_selfplay:
+        env = SelfPlayEnv(config.env, config.obs, config.reward, selfplay=config.selfplay,
+                          action_repeat=action_repeat(config))
+    else:
+        env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.algo in EXPERT_LABELLED,
+                          action_repeat=action_repeat(config))
     return env, build_learner(config, env)
 
 
@@ -127,8 +133,10 @@ def data_config(config: TrainConfig, path: str, **changes) -> DataConfig:
 
 
 def train_data_config(config: TrainConfig, path: str, seed: int) -> DataConfig:
-    """The training stream: one scenario at a time, seeded shuffle, repeated forever."""
-    return data_config(config, path, batch_size=1, shuffle_seed=seed, repeat=True, prefetch=0)
+    """The training stream: one scenario at a time, seeded shuffle, repeated forever (with every agent's path
+    under self-play)."""
+    return data_config(config, path, batch_size=1, shuffle_seed=seed, repeat=True, prefetch=0,
+                       include_agent_paths=config.is_selfplay)
 
 
 # ----------------------------------------------------------------------------- embedded synthetic data
@@ -397,7 +405,8 @@ def setup_training(config: TrainConfig, train_path: str, print_fn: Callable[[str
         carry, pool = shard_carry(carry, pool, mesh)
         print_fn(f"data-parallel over {mesh.size} devices ({num_envs // mesh.size} envs each)")
     return TrainingSetup(env=env, learner=learner, carry=carry, pool=pool, stream=stream, chunk_fn=chunk_fn,
-                         per_chunk=env_steps_per_chunk(config.algo, algo_config, chunk_steps(config)), mesh=mesh,
+                         per_chunk=env_steps_per_chunk(config.algo, algo_config, chunk_steps(config),
+                                                       config.agents_per_env), mesh=mesh,
                          buffer_mib=buffer_mib)
 
 

@@ -1,0 +1,111 @@
+"""Self-play: one policy drives the SDC and the controllable agents; per-agent rewards, terminations, goals, masks."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from tests.evaluation import modes_scenes
+from tests.evaluation.modes_scenes import PARKED_X
+from tests.integration_sim.conftest import small_data_config
+from tests.training.conftest import tiny_config
+from vmax_sim.data import load_batch
+from vmax_sim.env import EnvConfig
+from vmax_sim.env.selfplay import SelfPlayConfig, SelfPlayEnv
+from vmax_sim.training import apply_overrides, preset_config, train
+from vmax_sim.training.config import config_from_dict, config_to_dict
+
+parked_shards = modes_scenes.parked_shards  # the fixture
+K = 3  # agent slots: the SDC, the controllable agent, one empty slot
+
+
+def _rollout(shards, crashed: str, steps: int = 85):
+    """Zero actions (hold speed, straight) for `steps` steps: (outputs stacked over time, x of every object)."""
+    pool = load_batch(small_data_config(shards, include_agent_paths=True))
+    env = SelfPlayEnv(EnvConfig(max_num_objects=8), selfplay=SelfPlayConfig(max_agents=K, crashed=crashed))
+    state = env.reset(pool, 2, jax.random.PRNGKey(0))
+    step = jax.jit(env.step)
+    outs, xs = [], []
+    for _ in range(steps):
+        state, out = step(state, jnp.zeros((2 * K, env.action_dim)), pool)
+        outs.append(jax.device_get(out))
+        xs.append(np.asarray(state.sim.current_sim_trajectory.x[..., 0]))
+    stacked = jax.tree.map(lambda *a: np.stack(a), *outs)
+    return state, stacked, np.stack(xs)
+
+
+@pytest.fixture(scope="module")
+def removed(parked_shards):
+    return _rollout(parked_shards, "remove")
+
+
+def test_agents_are_the_sdc_then_the_controllable_ones_and_empty_slots_are_masked(parked_shards):
+    pool = load_batch(small_data_config(parked_shards, include_agent_paths=True))
+    env = SelfPlayEnv(EnvConfig(max_num_objects=8), selfplay=SelfPlayConfig(max_agents=K))
+    state = env.reset(pool, 2, jax.random.PRNGKey(0))
+    assert state.slots[:, :2].tolist() == [[0, 1], [0, 1]]  # the SDC, then the agent (the parked car is not one)
+    assert state.active.tolist() == [[True, True, False]] * 2
+    assert jax.tree.leaves(state.observation)[0].shape[0] == 2 * K  # one learner row per (scene, agent slot)
+    np.testing.assert_allclose(state.goal_xy[0, 1], [90.0, 0.0])  # the agent's last logged position
+
+
+def test_an_agent_that_crashes_ends_its_episode_and_leaves_the_scene(removed):
+    _, out, xs = removed
+    agent = out.terminated[:, 1]
+    crash = int(np.argmax(agent))
+    assert agent.any() and out.episode_flags["overlap"][crash, 1]  # it drove into the parked car
+    assert out.reward[crash, 1] < -0.5  # the collision penalty, its own
+    assert not out.active[crash + 1:crash + 20, 1].any()  # then it no longer acts...
+    assert not out.terminated[crash + 1:crash + 20, 1].any()  # ...nor ends another episode
+    assert not out.active[:, 2].any() and not out.done[:, 2].any()  # the empty slot never carries experience
+    front = xs[:crash + 1, 0, 1] + 2.25
+    assert front.max() > PARKED_X - 2.25  # it really reached the parked car
+
+
+def test_the_sdc_reaches_its_goal_and_the_scene_restarts(removed):
+    _, out, _ = removed
+    goal_step = int(np.argmax(out.episode_flags["goal_reached"][:, 0]))
+    assert out.episode_flags["goal_reached"][goal_step, 0] and out.terminated[goal_step, 0]
+    assert out.reward[goal_step, 0] > 1.0  # the goal bonus on top of progress
+    assert not out.episode_flags["overlap"][:, 0].any()
+    assert out.scene_done[goal_step].all()  # nobody left acting: both scenes restart
+    assert out.active[goal_step + 1].tolist() == [True, True, False] * 2  # with their agents back
+
+
+def test_a_crashed_agent_can_stay_as_a_still_obstacle(parked_shards, removed):
+    _, out, xs = _rollout(parked_shards, "obstacle", steps=60)
+    crash = int(np.argmax(out.terminated[:, 1]))
+    np.testing.assert_allclose(xs[crash:, 0, 1], xs[crash, 0, 1])  # stays where it crashed
+    _, _, removed_xs = removed
+    assert crash == int(np.argmax(removed[1].terminated[:, 1]))  # same crash either way
+
+
+def test_the_selfplay_preset_is_ppo_over_every_controllable_agent():
+    config = preset_config("ppo-selfplay")
+    assert config.algo == "ppo" and config.env.controlled == "controllable" and config.is_selfplay
+    assert config.agents_per_env == config.selfplay.max_agents == 8
+    changed = apply_overrides(config, ["selfplay.max_agents=4", "selfplay.crashed=obstacle"])
+    assert config_from_dict(config_to_dict(changed)).selfplay == changed.selfplay
+    with pytest.raises(ValueError, match="self-play trains with ppo"):
+        preset_config("sac-selfplay")
+    with pytest.raises(ValueError, match="trains with ppo, not sac"):
+        apply_overrides(preset_config("sac"), ["env.controlled=controllable"])
+    with pytest.raises(ValueError, match="selfplay.crashed"):
+        apply_overrides(config, ["selfplay.crashed=vanish"])
+
+
+@pytest.mark.slow  # ~60 s: a self-play ppo run on 16-object synthetic scenes
+def test_selfplay_run_logs_agent_steps_and_goals(synthetic_shards, tmp_path):
+    config = tiny_config(synthetic_shards, "ppo", "env.controlled=controllable", "selfplay.max_agents=4",
+                         "algo.unroll_length=4", "algo.num_minibatches=2", "algo.batch_size=4",
+                         "train.total_env_steps=40", "train.chunk_steps=1")
+    result = train(config, tmp_path / "run", progress=False, print_fn=lambda line: None)
+    assert result.summary["finished"] and result.final_evaluation["num_episodes"] == 4
+    import csv
+    with open(tmp_path / "run" / "metrics.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert rows and {"agent_steps", "episode/goal_reached"} <= set(rows[0])
+    first = rows[0]  # the first chunk: its env steps are the scene steps it ran
+    assert float(first["agent_steps"]) > float(first["env_steps"])  # several agents act in a scene
