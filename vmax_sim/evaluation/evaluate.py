@@ -71,7 +71,8 @@ def _scenarios(data, num_scenarios: int | None) -> Iterator[Scenario]:
         raise InputError(str(error)) from None
 
 
-def _batches(data, config: DataConfig, num_scenarios: int | None) -> Iterator[tuple[list[str], SimulatorState, int]]:
+def scenario_batches(data, config: DataConfig, num_scenarios: int | None
+                     ) -> Iterator[tuple[list[str], SimulatorState, int]]:
     """(scenario ids, host batch padded to batch_size by repeating its last state, number of real ones)."""
     ids: list[str] = []
     states: list[SimulatorState] = []
@@ -97,7 +98,7 @@ class PreparedBatches:
 
 def prepare_batches(data, num_scenarios: int | None = None) -> PreparedBatches:
     """Converts `data` (a DataConfig with its path and batch_size) once for repeated evaluations."""
-    return PreparedBatches(batches=tuple(_batches(data, data, num_scenarios)), data_config=data)
+    return PreparedBatches(batches=tuple(scenario_batches(data, data, num_scenarios)), data_config=data)
 
 
 def _summary(episodes: dict[str, np.ndarray], policy: str, mode: str | EvalMode) -> dict:
@@ -169,7 +170,7 @@ def evaluate(policy, data, mode: str | EvalMode = "non_reactive", *, data_config
     key = jax.random.PRNGKey(seed)
     collected: dict[str, list[np.ndarray]] = {}
     scenario_ids: list[str] = []
-    batches = data.batches if isinstance(data, PreparedBatches) else _batches(data, data_config, num_scenarios)
+    batches = data.batches if isinstance(data, PreparedBatches) else scenario_batches(data, data_config, num_scenarios)
     for ids, batch, real in batches:
         key, batch_key = jax.random.split(key)
         rollout = run_batch(jax.device_put(batch), jax.random.split(batch_key, data_config.batch_size), ids, params)

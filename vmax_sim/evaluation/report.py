@@ -27,12 +27,12 @@ from vmax_sim.data import DataConfig
 from vmax_sim.evaluation.evaluate import (
     EvaluationResult,
     PreparedBatches,
-    _batches,
     _check_mode,
     _summary,
     evaluate,
     mark_partial,
     partial_note,
+    scenario_batches,
     stop_requested,
 )
 from vmax_sim.evaluation.policies import POLICY_NAMES
@@ -190,7 +190,7 @@ def _evaluate_named(names: Sequence[str], config: DataConfig, mode: str, num_sce
     warm = [0 for _ in names]
     total = expected_num_scenarios(config.path, num_scenarios) if progress else None
     with Progress("evaluating " + ",".join(names), total, "scenarios", enabled=progress) as shown:
-        for number, batch in enumerate(_batches(config, config, num_scenarios)):
+        for number, batch in enumerate(scenario_batches(config, config, num_scenarios)):
             prepared = PreparedBatches(batches=(batch,), data_config=config)
             for i, name in enumerate(names):
                 start = time.perf_counter()

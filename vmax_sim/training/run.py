@@ -616,9 +616,24 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
                "reward": config.reward.preset, "env_steps": env_steps, "wall_s": wall_s,
                "median_env_steps_per_s": sps, "peak_rss_mb": peak_rss_mb(), "finished": finished,
                "stopped": stopped, "final_evaluation": final}
+    if config.is_selfplay:
+        summary["selfplay_evaluation"] = evaluator.selfplay_summary
     (run_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
     return TrainResult(run_dir=run_dir, env_steps=env_steps, wall_s=wall_s, env_steps_per_s=sps,
                        final_evaluation=final, summary=summary, stopped=stopped)
+
+
+def selfplay_env_and_act(config):
+    """The self-play evaluation environment of a run's settings (every simulator step, as evaluation acts) and
+    its learner's deterministic act(params, observation, key)."""
+    learner = components(config)[1]
+    env = SelfPlayEnv(config.env, config.obs, config.reward, selfplay=config.selfplay)
+    return env, _deterministic_act(learner)
+
+
+@functools.lru_cache(maxsize=8)
+def _deterministic_act(learner):
+    return lambda params, observation, key: learner.act(params, observation, key, True)
 
 
 class _Evaluator:
@@ -634,6 +649,7 @@ class _Evaluator:
         self.eval_path = eval_path
         self.log = RunLogger(run_dir, tensorboard=False, file_name="eval.csv")
         self.print_fn = print_fn
+        self.selfplay_summary: dict | None = None  # the last self-play evaluation (self-play runs)
 
     def truncate_after(self, env_steps: int) -> None:
         self.log.truncate_after(env_steps)
@@ -661,10 +677,27 @@ class _Evaluator:
                "vmax_score": summary["vmax_score"], "nuplan_score": summary["nuplan_score"],
                "accuracy_at_fault": summary["accuracy_at_fault"]}
         row.update({k: float(v) for k, v in summary["metrics"].items() if v is not None and k in EVAL_COLUMNS})
+        line = (f"eval @ {env_steps:,} env steps: accuracy {summary['accuracy']:.3f}  "
+                f"V-Max score {summary['vmax_score']:.3f}  ({summary['num_episodes']} held-out episodes)")
+        if self.config.is_selfplay:
+            selfplay = self._selfplay(params)
+            row.update({f"selfplay/{name}": selfplay[name] for name in SELFPLAY_COLUMNS})
+            line += (f"; every agent: goal {selfplay['goal_reached']:.3f}  collision {selfplay['collision']:.3f}  "
+                     f"off-road {selfplay['offroad']:.3f}  ({selfplay['num_agents']} agents)")
         self.log.log(env_steps, row)
-        self.print_fn(f"eval @ {env_steps:,} env steps: accuracy {summary['accuracy']:.3f}  "
-                      f"V-Max score {summary['vmax_score']:.3f}  ({summary['num_episodes']} held-out episodes)")
+        self.print_fn(line)
         return summary
+
+    def _selfplay(self, params) -> dict:
+        """One policy drives every agent of the held-out scenes (vmax_sim.evaluation.selfplay)."""
+        from vmax_sim.evaluation.evaluate import scenario_batches
+        from vmax_sim.evaluation.selfplay import evaluate_selfplay
+
+        env, act = selfplay_env_and_act(self.config)
+        settings = dataclasses.replace(self.data, include_agent_paths=True)
+        batches = scenario_batches(self.eval_path, settings, self.config.train.eval_scenarios)
+        self.selfplay_summary = evaluate_selfplay(env, act, params, batches).summary()
+        return self.selfplay_summary
 
     def plot(self, path: Path, train_rows: list[dict]) -> None:
         from vmax_sim.training.plots import plot_learning_curve
@@ -692,4 +725,5 @@ def _policy_of(config: TrainConfig):
     return trained_policy(components(config)[1], name=f"{config.algo}-{config.network.name}")
 
 
+SELFPLAY_COLUMNS = ("goal_reached", "collision", "offroad", "collision_or_offroad", "goal_reached_clean")
 EVAL_COLUMNS = ("overlap", "offroad", "red_light", "off_route", "ego_progress", "comfort", "progress_ratio")

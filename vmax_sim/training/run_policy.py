@@ -23,7 +23,13 @@ from vmax_sim.map_index.structure import MapIndexConfig
 from vmax_sim.observation import LIGHT_FEATURES, OBJECT_FEATURES, ROADGRAPH_FEATURES, Observation
 from vmax_sim.policies.base import Policy
 from vmax_sim.training.checkpoint import CheckpointStore
-from vmax_sim.training.run import components, data_config, load_run_config, resolve_eval_data
+from vmax_sim.training.run import (
+    components,
+    data_config,
+    load_run_config,
+    resolve_eval_data,
+    selfplay_env_and_act,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,3 +101,21 @@ def evaluate_run(run_dir: str | Path, data: str | None = None, mode: str = "non_
 
 
 __all__ = ["LoadedPolicy", "evaluate_run", "load_trained_policy"]
+
+
+def evaluate_selfplay_run(run_dir: str | Path, data: str | None = None, num_scenarios: int | None = None,
+                          batch_size: int = 8, step: int | None = None, progress: bool = False, seed: int = 0):
+    """One policy (a training run's, self-play or not) drives every agent of `data` (default: the run's held-out
+    split): `vmax_sim.evaluation.selfplay.SelfPlayResult`."""
+    from vmax_sim.evaluation.evaluate import scenario_batches
+    from vmax_sim.evaluation.selfplay import evaluate_selfplay
+
+    loaded = load_trained_policy(run_dir, step)
+    config = loaded.config
+    path = data or resolve_eval_data(config, lambda line: print(line, file=sys.stderr))
+    env, act = selfplay_env_and_act(config)
+    data_settings = data_config(config, path, batch_size=batch_size, include_agent_paths=True)
+    total = expected_num_scenarios(path, num_scenarios) if progress else None
+    with Progress(f"self-play {Path(run_dir).name}", total, "scenarios", enabled=progress) as shown:
+        return evaluate_selfplay(env, act, loaded.params, scenario_batches(path, data_settings, num_scenarios),
+                                 seed=seed, on_batch=shown.update if progress else None)
