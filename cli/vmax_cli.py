@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -169,9 +170,11 @@ def train(preset, data, eval_data, out, resume_dir, quiet, deep, skip_checks, ov
 @click.option("--mode", default="non_reactive", show_default=True,
               help="Evaluation mode: non_reactive (others replay the log), reactive (controllable agents driven "
                    "along their paths), perturbed (the SDC starts off its log), adversarial (one vehicle re-planned "
-                   "to cut in on the SDC). See docs/evaluation-modes.md.")
+                   "to cut in on the SDC), selfplay (the run's policy drives the SDC and every controllable agent: "
+                   "goal-reaching, collision, off-road per agent). See docs/evaluation-modes.md.")
 @click.option("--agents", default=None, help="reactive: who drives the controllable agents: idm (default), pdm, "
-                                              "or same (the evaluated policy: self-play).")
+                                              "same (the evaluated policy: self-play), or a training run directory "
+                                              "(learned traffic).")
 @click.option("--max-agents", type=click.IntRange(1), default=None,
               help="reactive: at most this many agents are driven, nearest the SDC first (default 48).")
 @click.option("--perturb-sigma", type=click.FloatRange(0.0), default=None,
@@ -221,9 +224,16 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
     from vmax_sim.training.run_policy import evaluate_run
     from vmax_sim.visualization.view import run_data
 
+    if mode == "selfplay":
+        _evaluate_selfplay(policy, data, num_scenarios, batch_size, seed, as_json, out, quiet, deep, skip_checks)
+        return
     try:
         mode_name = mode
-        mode = parse_mode(mode, agents=agents, perturb_sigma=perturb_sigma, max_agents=max_agents, seed=seed)
+        traffic = _learned_traffic(agents)
+        mode = parse_mode(mode, agents=agents if traffic is None else "idm", perturb_sigma=perturb_sigma,
+                          max_agents=max_agents, seed=seed)
+        if traffic is not None:
+            mode = dataclasses.replace(mode, agents="learned", agent_policy=traffic, agent_run=agents)
         entries = split_policies(policy)
         _check_data([data or ""], deep, skip_checks, quiet)  # without --data a run's held-out split is checked as read
         out_dir = out if out and not out.endswith(".json") else None
@@ -262,6 +272,44 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
                       note=f"data: {data or 'the held-out split of each run'}",
                       data=run_data(entries, data, lambda line: click.echo(line, err=True)) if view_file else None,
                       mode_name=mode.name)
+    except (InputError, ValueError, OSError) as error:
+        _fail(one_line(error))
+
+
+def _learned_traffic(agents: str | None):
+    """--agents RUN_DIR: (policy, params, observation settings) of the run, else None (a rule driver's name)."""
+    if agents is None or not (Path(agents) / "config.json").is_file():
+        return None
+    from vmax_sim.training.run_policy import load_trained_policy
+
+    loaded = load_trained_policy(agents)
+    return loaded.policy, loaded.params, loaded.config.obs
+
+
+def _evaluate_selfplay(policy, data, num_scenarios, batch_size, seed, as_json, out, quiet, deep, skip_checks) -> None:
+    """`evaluate --mode selfplay`: each run's policy drives every agent of the scenes (vmax_sim.evaluation.selfplay)."""
+    from vmax_sim.evaluation.selfplay import format_selfplay
+    from vmax_sim.training.run_policy import evaluate_selfplay_run
+
+    try:
+        runs = [entry.strip() for entry in policy.split(",") if entry.strip()]
+        for run in runs:
+            if not (Path(run) / "config.json").is_file():
+                raise InputError(f"{run}: --mode selfplay drives every agent with a trained policy; give training run "
+                                 f"directories, not {run!r}")
+        _check_data([data or ""], deep, skip_checks, quiet)
+        summaries = {}
+        for run in runs:
+            result = evaluate_selfplay_run(run, data, num_scenarios, batch_size, progress=not quiet, seed=seed)
+            summaries[run] = {**result.summary(), "data": data or "the run's held-out split"}
+        if as_json:
+            click.echo(json.dumps(summaries if len(runs) > 1 else summaries[runs[0]], indent=2))
+        else:
+            click.echo("\n".join(format_selfplay(summary, f"self-play {run}") for run, summary in summaries.items()))
+        if out:
+            target = Path(out) if out.endswith(".json") else Path(out) / "selfplay.json"
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_text(json.dumps(summaries, indent=2))
     except (InputError, ValueError, OSError) as error:
         _fail(one_line(error))
 

@@ -19,7 +19,7 @@ from typing import Any
 
 MODE_NAMES = ("non_reactive", "reactive", "perturbed", "adversarial")
 PLANNED_MODES: tuple[str, ...] = ()
-AGENT_DRIVERS = ("idm", "pdm", "same")
+AGENT_DRIVERS = ("idm", "pdm", "same", "learned")
 AGENT_SPEEDS = ("limit", "log")
 
 
@@ -80,8 +80,13 @@ class AdversaryConfig:
 @dataclasses.dataclass(frozen=True)
 class EvalMode:
     name: str = "non_reactive"  # one of MODE_NAMES
-    # reactive: who drives the controllable agents: "idm", "pdm" or "same" (the evaluated policy, self-play)
+    # reactive: who drives the controllable agents: "idm", "pdm", "same" (the evaluated policy, self-play) or
+    # "learned" (a trained policy of its own, `agent_policy`: learned traffic)
     agents: str = "idm"
+    # agents="learned": (Policy, its params, its ObservationConfig), e.g. a self-play run's; `agent_run` names it
+    # (and keys the compiled rollouts: the policy itself is not compared)
+    agent_policy: Any = dataclasses.field(default=None, compare=False, hash=False, repr=False)
+    agent_run: str = ""
     max_agents: int = 48  # reactive: at most this many agents (nearest the SDC) are driven; the rest replay
     # reactive, agents="idm": a vmax_sim.policies.IDMConfig (None: its defaults; not imported here, as
     # vmax_sim.policies imports this package)
@@ -106,6 +111,9 @@ class EvalMode:
             raise ValueError(f"EvalMode.agent_speed must be one of {AGENT_SPEEDS}, got {self.agent_speed!r}")
         if self.max_agents < 1:
             raise ValueError(f"EvalMode.max_agents must be at least 1, got {self.max_agents}")
+        if (self.agents == "learned") != (self.agent_policy is not None):
+            raise ValueError("learned traffic (agents='learned') takes a trained policy: give a training run "
+                             "directory as --agents")
 
     @property
     def is_reactive(self) -> bool:
@@ -125,6 +133,8 @@ class EvalMode:
             rules = {"agent_follow_log": self.agent_follow_log}
             if self.agents == "idm":
                 rules["agent_speed"] = self.agent_speed
+            if self.agents == "learned":
+                return {"agents": self.agent_run or "learned", "max_agents": self.max_agents}
             return {"agents": self.agents, "max_agents": self.max_agents, **(rules if self.agents != "same" else {})}
         if self.is_perturbed:
             return {"sigma": self.perturb.sigma, "heading_sigma": self.perturb.heading_sigma_rad,

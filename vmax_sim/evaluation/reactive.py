@@ -162,11 +162,16 @@ def policy_agent_fn(policy: Policy, metrics_config: MetricsConfig, obs_config: O
 
 def make_agent_fn(mode: EvalMode, env, policy: Policy, metrics_config: MetricsConfig,
                   obs_config: ObservationConfig) -> AgentFn:
-    """The agents' driver of a reactive mode: IDM, PDM-Closed (default configs) or the evaluated policy."""
+    """The agents' driver of a reactive mode: IDM, PDM-Closed (default configs), the evaluated policy, or a
+    trained policy of their own (learned traffic: its parameters are fixed, whatever the evaluated policy's)."""
     if mode.agents == "idm":
         return idm_agent_fn(env, mode)
     if mode.agents == "pdm":
         return pdm_agent_fn(env, mode)
+    if mode.agents == "learned":
+        agent_policy, agent_params, agent_obs_config = mode.agent_policy
+        drive = policy_agent_fn(agent_policy, metrics_config, agent_obs_config)
+        return lambda params, view, key: drive(agent_params, view, key)
     return policy_agent_fn(policy, metrics_config, obs_config)
 
 
