@@ -30,6 +30,12 @@ CONFIGS = [  # (preset, overrides); a PPO chunk step is a whole update (2,560 en
     ("ppo-mlp", []),
     ("bc-mlp", []),
     ("bc_sac-lq", []),
+    # self-play: one policy drives the SDC and up to K - 1 controllable agents of each of num_envs scenes; env steps
+    # count scenes, agent steps the agents acting in them (the synthetic scenes hold ~7 movable agents)
+    ("ppo-selfplay", ["selfplay.max_agents=1"]),
+    ("ppo-selfplay", ["selfplay.max_agents=8"]),
+    ("ppo-selfplay", ["selfplay.max_agents=8", "algo.num_envs=16"]),
+    ("ppo-selfplay", ["selfplay.max_agents=32", "algo.num_envs=4"]),
 ]
 
 
@@ -72,8 +78,10 @@ def main() -> None:
         row = json.loads(done.stdout.strip().splitlines()[-1])
         rows.append(row)
         if not args.json:
+            agents = f"  {row['agent_steps_per_s']:>9,.0f} agent steps/s" if "agent_steps_per_s" in row else ""
             print(f"{preset:<16} {' '.join(overrides):<24} envs {row['num_envs']:>4}  "
-                  f"{row['env_steps_per_s']:>9,.0f} env steps/s  (min {row['min']:,.0f}, max {row['max']:,.0f})  "
+                  f"{row['env_steps_per_s']:>9,.0f} env steps/s{agents}  "
+                  f"(min {row['min']:,.0f}, max {row['max']:,.0f})  "
                   f"peak RSS {row['peak_rss_mb']:,.0f} MB  buffer {row['buffer_mib']:,.0f} MiB  [{row['device']}]",
                   flush=True)
     if args.json:

@@ -44,6 +44,9 @@ class SelfPlayConfig:
     max_agents: int = 8  # K: agents driven per scene, the SDC included (1: the SDC alone)
     goal_radius_m: float = 2.0  # an agent reaches its goal within this distance of its last logged position
     goal_reward: float = 1.0  # added to the reward of the step an agent reaches its goal
+    # added per metre the agent got closer to its goal in a step (dense: the goal is its position 8 s on in the
+    # log, so an agent slower than its log never reaches it, and the binary progress term does not tell)
+    approach_reward: float = 0.0
     crashed: str = "remove"  # "remove": a crashed agent leaves the scene; "obstacle": it stays, standing still
 
     def __post_init__(self) -> None:
@@ -197,18 +200,18 @@ class SelfPlayEnv:
     def _substep(self, parts, slots, arcs, goals, action):
         """One simulator step of the held actions: agents still acting move, score and may finish."""
         sim, acting, gone, still, metrics, reward, terminated, goal, flags = parts
+        distance_before = self._goal_distance(sim, slots, goals)
         sim = self._move(sim, slots, acting, action, gone, still)
         new_metrics = jax.vmap(lambda slot, a: self._measure(sim, slot, a, None)[0])(slots, arcs)
         crashed = jnp.zeros_like(acting)
         for name in self.env_config.terminate_on:
             crashed = crashed | (new_metrics[TERMINATION_METRICS[name]] > 0.5)
         crashed = acting & crashed
-        now = sim.current_sim_trajectory
-        xy = jnp.stack([now.x[slots, 0], now.y[slots, 0]], -1)  # (K, 2)
-        distance = jnp.hypot(xy[:, 0] - goals[:, 0], xy[:, 1] - goals[:, 1])
+        distance = self._goal_distance(sim, slots, goals)
         reached = acting & ~crashed & (distance < self.selfplay.goal_radius_m)
         step_reward = compute_reward(new_metrics, metrics, self.reward_config, self.metrics_config)
-        step_reward = step_reward + self.selfplay.goal_reward * reached
+        step_reward = (step_reward + self.selfplay.goal_reward * reached
+                       + self.selfplay.approach_reward * (distance_before - distance))
         reward = reward + jnp.where(acting, step_reward, 0.0)
         flags = {name: flags[name] | (acting & (new_metrics[name] > 0.5)) for name in EPISODE_FLAGS}
         metrics = jax.tree.map(lambda n, o: jnp.where(acting, n, o), new_metrics, metrics)
@@ -218,6 +221,12 @@ class SelfPlayEnv:
         still = still.at[jnp.where(crashed & ~leaving, finished, sim.num_objects)].set(True, mode="drop")
         acting = acting & ~crashed & ~reached
         return (sim, acting, gone, still, metrics, reward, terminated | crashed | reached, goal | reached, flags)
+
+    @staticmethod
+    def _goal_distance(sim: SimulatorState, slots: jax.Array, goals: jax.Array) -> jax.Array:
+        """Each agent's distance to its goal now. (K,) m"""
+        now = sim.current_sim_trajectory
+        return jnp.hypot(now.x[slots, 0] - goals[:, 0], now.y[slots, 0] - goals[:, 1])
 
     def _advance(self, sim, slots, active, gone, still, goals, arcs, metrics, action, key):
         """One policy step of one scene: actions (K, A) held for `action_repeat` simulator steps, or until the
