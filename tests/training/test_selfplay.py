@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -14,6 +20,8 @@ from tests.training.conftest import tiny_config
 from vmax_sim.data import load_batch
 from vmax_sim.env import EnvConfig
 from vmax_sim.env.selfplay import SelfPlayConfig, SelfPlayEnv
+from vmax_sim.evaluation.modes import EvalMode
+from vmax_sim.evaluation.selfplay import SelfPlayResult, format_selfplay
 from vmax_sim.training import apply_overrides, preset_config, train
 from vmax_sim.training.config import config_from_dict, config_to_dict
 
@@ -25,7 +33,7 @@ def _rollout(shards, crashed: str, steps: int = 85):
     """Zero actions (hold speed, straight) for `steps` steps: (outputs stacked over time, x of every object)."""
     pool = load_batch(small_data_config(shards, include_agent_paths=True))
     env = SelfPlayEnv(EnvConfig(max_num_objects=8), selfplay=SelfPlayConfig(max_agents=K, crashed=crashed))
-    state = env.reset(pool, 2, jax.random.PRNGKey(0))
+    state = jax.jit(env.reset, static_argnums=1)(pool, 2, jax.random.PRNGKey(0))
     step = jax.jit(env.step)
     outs, xs = [], []
     for _ in range(steps):
@@ -44,7 +52,7 @@ def removed(parked_shards):
 def test_agents_are_the_sdc_then_the_controllable_ones_and_empty_slots_are_masked(parked_shards):
     pool = load_batch(small_data_config(parked_shards, include_agent_paths=True))
     env = SelfPlayEnv(EnvConfig(max_num_objects=8), selfplay=SelfPlayConfig(max_agents=K))
-    state = env.reset(pool, 2, jax.random.PRNGKey(0))
+    state = jax.jit(env.reset, static_argnums=1)(pool, 2, jax.random.PRNGKey(0))
     assert state.slots[:, :2].tolist() == [[0, 1], [0, 1]]  # the SDC, then the agent (the parked car is not one)
     assert state.active.tolist() == [[True, True, False]] * 2
     assert jax.tree.leaves(state.observation)[0].shape[0] == 2 * K  # one learner row per (scene, agent slot)
@@ -74,6 +82,7 @@ def test_the_sdc_reaches_its_goal_and_the_scene_restarts(removed):
     assert out.active[goal_step + 1].tolist() == [True, True, False] * 2  # with their agents back
 
 
+@pytest.mark.slow  # a second compilation of the step (~35 s)
 def test_a_crashed_agent_can_stay_as_a_still_obstacle(parked_shards, removed):
     _, out, xs = _rollout(parked_shards, "obstacle", steps=60)
     crash = int(np.argmax(out.terminated[:, 1]))
@@ -96,16 +105,48 @@ def test_the_selfplay_preset_is_ppo_over_every_controllable_agent():
         apply_overrides(config, ["selfplay.crashed=vanish"])
 
 
-@pytest.mark.slow  # ~60 s: a self-play ppo run on 16-object synthetic scenes
-def test_selfplay_run_logs_agent_steps_and_goals(synthetic_shards, tmp_path):
+def test_selfplay_summary_counts_agents_and_scenes():
+    agents = {"goal_reached": np.array([True, True, False, True]), "overlap": np.array([False, True, False, False]),
+              "offroad": np.array([False, False, True, False]), "red_light": np.zeros(4, bool),
+              "length": np.array([30, 12, 5, 40]), "scene": np.array([0, 0, 1, 2])}
+    summary = SelfPlayResult(agents=agents, scene_ids=["a", "b", "c"]).summary()
+    assert summary["num_agents"] == 4 and summary["agents_per_scene"] == pytest.approx(4 / 3)
+    assert summary["goal_reached"] == 0.75 and summary["goal_reached_clean"] == 0.5  # the second crashed after
+    assert summary["collision_or_offroad"] == 0.5
+    assert summary["scenes_all_agents_clean_goal"] == pytest.approx(1 / 3)  # only scene 2
+    assert "goal reached (higher is better)" in format_selfplay(summary)
+
+
+def test_learned_traffic_needs_a_trained_policy():
+    with pytest.raises(ValueError, match="training run directory"):
+        EvalMode(name="reactive", agents="learned")
+
+
+@pytest.mark.slow  # ~2 min: a self-play ppo run on 16-object synthetic scenes, then its policy as traffic
+def test_selfplay_run_logs_agent_steps_and_goals_then_drives_every_agent(synthetic_shards, tmp_path):
     config = tiny_config(synthetic_shards, "ppo", "env.controlled=controllable", "selfplay.max_agents=4",
                          "algo.unroll_length=4", "algo.num_minibatches=2", "algo.batch_size=4",
                          "train.total_env_steps=40", "train.chunk_steps=1")
-    result = train(config, tmp_path / "run", progress=False, print_fn=lambda line: None)
+    run = tmp_path / "run"
+    result = train(config, run, progress=False, print_fn=lambda line: None)
     assert result.summary["finished"] and result.final_evaluation["num_episodes"] == 4
-    import csv
-    with open(tmp_path / "run" / "metrics.csv") as f:
+    selfplay = result.summary["selfplay_evaluation"]
+    assert selfplay["num_scenes"] == 4 and selfplay["num_agents"] >= 4
+    with open(run / "metrics.csv") as f:
         rows = list(csv.DictReader(f))
     assert rows and {"agent_steps", "episode/goal_reached"} <= set(rows[0])
     first = rows[0]  # the first chunk: its env steps are the scene steps it ran
     assert float(first["agent_steps"]) > float(first["env_steps"])  # several agents act in a scene
+    with open(run / "eval.csv") as f:
+        assert "selfplay/goal_reached" in next(csv.DictReader(f))
+
+    cli = [str(Path(sys.executable).parent / "vmax-sim")]
+    shown = subprocess.run([*cli, "evaluate", "--mode", "selfplay", "--policy", str(run), "--num-scenarios", "4",
+                            "--json", "--quiet"], capture_output=True, text=True, timeout=600)
+    assert shown.returncode == 0, shown.stderr
+    assert json.loads(shown.stdout)["num_agents"] == selfplay["num_agents"]  # same scenes, same agents
+    traffic = subprocess.run([*cli, "evaluate", "--policy", "idm", "--mode", "reactive", "--agents", str(run),
+                              "--data", str(synthetic_shards), "--num-objects", "16", "--num-scenarios", "4",
+                              "--json", "--quiet"], capture_output=True, text=True, timeout=600)
+    assert traffic.returncode == 0, traffic.stderr
+    assert json.loads(traffic.stdout)["mode_options"]["agents"] == str(run)
