@@ -89,13 +89,7 @@ class LearningEnv:
     def __post_init__(self) -> None:
         if self.env_config.controlled != "sdc":
             raise ValueError("LearningEnv drives the SDC only: EnvConfig.controlled must be 'sdc'")
-        unknown = set(self.env_config.terminate_on) - set(TERMINATION_METRICS)
-        if unknown:
-            raise ValueError(f"EnvConfig.terminate_on: unknown {sorted(unknown)}; choose among "
-                             f"{sorted(TERMINATION_METRICS)}")
-        check_reward_config(self.reward_config)
-        if self.action_repeat < 1:
-            raise ValueError(f"action_repeat must be at least 1, got {self.action_repeat}")
+        check_learning_settings(self.env_config, self.reward_config, self.action_repeat)
         config = dataclasses.replace(self.env_config, normalize_actions=True)  # policies act in [-1, 1]
         object.__setattr__(self, "env_config", config)
         object.__setattr__(self, "core", Environment(config))
@@ -239,6 +233,17 @@ class LearningEnv:
             num_done > 0, lambda parts: jax.lax.fori_loop(0, num_done, restart_one, parts), lambda parts: parts, kept)
         return state.replace(sim=sim, arcs=arcs, shared=shared, metrics=metrics, observation=observation,
                              next_scenario=((state.next_scenario + num_done) % pool_size).astype(jnp.int32))
+
+
+def check_learning_settings(env_config: EnvConfig, reward_config: RewardConfig, action_repeat: int) -> None:
+    """One-line ValueError for terminations, reward terms or an action repeat a learning env cannot use."""
+    unknown = set(env_config.terminate_on) - set(TERMINATION_METRICS)
+    if unknown:
+        raise ValueError(f"EnvConfig.terminate_on: unknown {sorted(unknown)}; choose among "
+                         f"{sorted(TERMINATION_METRICS)}")
+    check_reward_config(reward_config)
+    if action_repeat < 1:
+        raise ValueError(f"action_repeat must be at least 1, got {action_repeat}")
 
 
 def _has_noise(config: ObservationConfig) -> bool:

@@ -29,11 +29,11 @@ from vmax_sim.datatypes import Action, SimulatorState, update_timestep
 from vmax_sim.env.agent_view import agent_view, choose_agents, with_sdc_route
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.environment import Environment
-from vmax_sim.env.learning import EPISODE_FLAGS, TERMINATION_METRICS, _has_noise
+from vmax_sim.env.learning import EPISODE_FLAGS, TERMINATION_METRICS, _has_noise, check_learning_settings
 from vmax_sim.env.metrics_adapter import reference_arcs, sdc_index, sdc_observation, step_inputs
 from vmax_sim.metrics import MetricsConfig, shared_queries, step_metrics
 from vmax_sim.observation import Observation, ObservationConfig
-from vmax_sim.rewards import RewardConfig, check_reward_config, compute_reward
+from vmax_sim.rewards import RewardConfig, compute_reward
 
 CRASHED_CHOICES = ("remove", "obstacle")
 AGENT_FLAGS = (*EPISODE_FLAGS, "goal_reached")  # per-agent episode indicators
@@ -115,13 +115,7 @@ class SelfPlayEnv:
     expert_labels: bool = False  # no log-following labels: kept for LearningEnv's interface
 
     def __post_init__(self) -> None:
-        unknown = set(self.env_config.terminate_on) - set(TERMINATION_METRICS)
-        if unknown:
-            raise ValueError(f"EnvConfig.terminate_on: unknown {sorted(unknown)}; choose among "
-                             f"{sorted(TERMINATION_METRICS)}")
-        check_reward_config(self.reward_config)
-        if self.action_repeat < 1:
-            raise ValueError(f"action_repeat must be at least 1, got {self.action_repeat}")
+        check_learning_settings(self.env_config, self.reward_config, self.action_repeat)
         config = dataclasses.replace(self.env_config, normalize_actions=True, controlled="controllable")
         object.__setattr__(self, "env_config", config)
         object.__setattr__(self, "core", Environment(config))
