@@ -95,6 +95,9 @@ def test_the_selfplay_preset_is_ppo_over_every_controllable_agent():
     config = preset_config("ppo-selfplay")
     assert config.algo == "ppo" and config.env.controlled == "controllable" and config.is_selfplay
     assert config.agents_per_env == config.selfplay.max_agents == 8
+    assert config.reward.preset == "safety" and config.selfplay.approach_reward > 0  # the goal, not binary progress
+    assert preset_config("ppo-selfplay-navigation").reward.preset == "navigation"
+    assert preset_config("ppo").reward.preset == "navigation" and not preset_config("ppo").is_selfplay
     changed = apply_overrides(config, ["selfplay.max_agents=4", "selfplay.crashed=obstacle"])
     assert config_from_dict(config_to_dict(changed)).selfplay == changed.selfplay
     with pytest.raises(ValueError, match="self-play trains with ppo"):

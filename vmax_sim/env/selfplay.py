@@ -46,7 +46,7 @@ class SelfPlayConfig:
     goal_reward: float = 1.0  # added to the reward of the step an agent reaches its goal
     # added per metre the agent got closer to its goal in a step (dense: the goal is its position 8 s on in the
     # log, so an agent slower than its log never reaches it, and the binary progress term does not tell)
-    approach_reward: float = 0.0
+    approach_reward: float = 0.05
     crashed: str = "remove"  # "remove": a crashed agent leaves the scene; "obstacle": it stays, standing still
 
     def __post_init__(self) -> None:

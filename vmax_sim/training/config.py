@@ -161,7 +161,7 @@ _SECTION_FIELD = {"algo": "algo_config", "network": "network", "env": "env", "ob
 
 def preset_config(name: str = "sac") -> TrainConfig:
     """The TrainConfig of a preset name such as `sac-lq-navigation` (see the module docstring)."""
-    algo, encoder, reward, algo_preset, selfplay = "sac", None, "navigation", "default", False
+    algo, encoder, reward, algo_preset, selfplay = "sac", None, None, "default", False
     for word in (w for w in name.lower().split("-") if w):
         if word in ALGORITHMS:
             algo = word
@@ -181,9 +181,10 @@ def preset_config(name: str = "sac") -> TrainConfig:
         named = [w for w in name.lower().split("-") if w in ALGORITHMS and w != "ppo"]
         if named:
             raise ValueError(f"self-play trains with ppo: {name!r} names {named[0]}")
-        return selfplay_config(encoder, reward, algo_preset)
+        return selfplay_config(encoder, reward or SELFPLAY_REWARD, algo_preset)
     network = EncoderConfig(name=encoder or DEFAULT_ENCODER[algo])
-    return TrainConfig(algo=algo, algo_preset=algo_preset, network=network, reward=RewardConfig(preset=reward))
+    return TrainConfig(algo=algo, algo_preset=algo_preset, network=network,
+                       reward=RewardConfig(preset=reward or "navigation"))
 
 
 def selfplay_config(encoder: str | None, reward: str, algo_preset: str) -> TrainConfig:
@@ -198,6 +199,10 @@ def selfplay_config(encoder: str | None, reward: str, algo_preset: str) -> Train
 
 # scenes stepped at once under self-play: with 8 agent slots each, 64 learner rows (the SDC-only ppo has 16)
 SELFPLAY_ENVS = 8
+# self-play's reward preset: the penalties, with the goal and the approach to it (SelfPlayConfig) in place of the
+# navigation preset's binary progress, which paid a slow agent as much as one that reaches its goal (30 min:
+# goal-reaching 32% with navigation, 71% with safety + approach; docs/selfplay.md)
+SELFPLAY_REWARD = "safety"
 
 
 # per algorithm, what learns best per minute on this CPU (docs/learning.md): the MLP encoder learns as fast as LQ
