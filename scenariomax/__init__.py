@@ -43,6 +43,7 @@ PUBLIC_MODULES = (
     "scenariomax.render",
     "scenariomax.inspect",
     "scenariomax.view",
+    "scenariomax.validate",  # record and shard checks: train / evaluate run them before starting
 )
 
 # Entry points imported on first use (name -> module): they pull in scipy, shapely or matplotlib.
