@@ -81,6 +81,7 @@ def test_a_follower_is_never_turned_into_a_rear_end_attack():
     assert info["adversary_found"] == 0.0 and info["adversary_slot"] == -1.0
 
 
+@pytest.mark.slow  # 8-38 s on 2 cores: the default suite stays under 10 minutes
 def test_the_evaluated_sdc_meets_the_adversary(tmp_path):
     scenariomax.write_shards([side_by_side("side"), follower("behind")], tmp_path, sizes=SMALL_SIZES)
     data = small_data_config(tmp_path)

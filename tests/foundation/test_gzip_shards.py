@@ -128,7 +128,7 @@ def test_a_truncated_or_corrupted_gzip_shard_is_one_line_naming_the_file(outputs
 
 
 def test_the_cli_validates_a_truncated_gzip_shard_without_a_traceback(outputs, tmp_path):
-    from cli.scenariomax_cli import main
+    from vmax_cli.scenariomax_cli import main
 
     _, _, _, packed = outputs
     cut = tmp_path / "cut.tfrecord"
@@ -196,7 +196,7 @@ def test_a_manifest_from_before_compression_resumes_as_uncompressed(tmp_path):
 
 
 def test_the_cli_converts_with_compression_gzip_and_every_command_reads_it(tmp_path):
-    from cli.scenariomax_cli import main
+    from vmax_cli.scenariomax_cli import main
 
     out = tmp_path / "shards"
     runner = CliRunner()

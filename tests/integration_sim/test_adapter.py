@@ -65,6 +65,7 @@ def test_environment_terminates_only_on_the_named_metrics():
         make_environment(EnvConfig(max_num_objects=8, terminate_on=("speeding",)))
 
 
+@pytest.mark.slow  # 8-38 s on 2 cores: the default suite stays under 10 minutes
 def test_termination_works_on_batched_states():
     config = small_data_config("")
     batch = scenarios_to_batch([braking_scenario("a"), braking_scenario("b")], config)

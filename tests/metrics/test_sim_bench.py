@@ -25,6 +25,7 @@ def test_map_index_shapes_ignore_roadgraph_size():
         jax.tree_util.tree_map(lambda x: x.shape, large.map_index)
 
 
+@pytest.mark.slow  # 8-38 s on 2 cores: the default suite stays under 10 minutes
 def test_full_step_runs_batched():
     init_fn, step_fn = make_episode_fns(with_observation=True, with_metrics=True, num_objects=16)
     state, arcs = jax.vmap(init_fn)(_scenes(2, 16, 2000, num_distinct=2))

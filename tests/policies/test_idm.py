@@ -126,6 +126,7 @@ def test_idm_action_in_normalised_units():
     assert 0.0 < float(physical[0]) <= 1.5 and abs(float(physical[1])) < 1e-3
 
 
+@pytest.mark.slow  # 8-38 s on 2 cores: the default suite stays under 10 minutes
 def test_batched_idm_equals_unbatched_without_recompiling(policy_shards):
     batched = evaluate("idm", small_data_config(policy_shards, batch_size=2))
     index = {name: i for i, name in enumerate(batched.scenario_ids)}

@@ -104,6 +104,7 @@ def test_pdm_config_errors_are_one_line():
         PDMConfig(lateral_offsets=())
 
 
+@pytest.mark.slow  # 8-38 s on 2 cores: the default suite stays under 10 minutes
 def test_batched_pdm_equals_unbatched_without_recompiling(policy_shards):
     batched = evaluate("pdm", small_data_config(policy_shards, batch_size=2))
     assert batched.summary["accuracy"] == 1.0

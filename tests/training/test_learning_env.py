@@ -36,6 +36,7 @@ def run(policy, steps: int, batch_size: int = 2, env: LearningEnv = ENV):
     return roll(state)[1]
 
 
+@pytest.mark.slow  # 8-38 s on 2 cores: the default suite stays under 10 minutes
 def test_expert_episode_truncates_with_positive_return_and_keeps_its_last_observation():
     out, _ = run(ENV.expert_action, 80)
     assert not bool(jnp.any(out.terminated))

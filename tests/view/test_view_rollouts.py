@@ -134,6 +134,7 @@ def test_evaluate_view_writes_the_failed_episodes_first_with_every_policy(evalua
     assert meta["sims"][0]["failures"][0]["metric"] == "overlap" and meta["sims"][1]["failures"] == []
 
 
+@pytest.mark.slow  # 8-38 s on 2 cores: the default suite stays under 10 minutes
 def test_viewing_an_evaluation_directory_reruns_its_policies_on_its_failures_first(evaluation, tmp_path):
     failed = failed_by_constant(evaluation)
     assert "brake" in failed and "cruise" not in failed
