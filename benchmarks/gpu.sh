@@ -24,6 +24,11 @@ log "training throughput rows (SAC, PPO, BC)"
 timeout 180 $py benchmarks/training.py --json --chunks 4 --only "sac-mlp,ppo-mlp,bc-mlp" \
   >"$out/training.json" 2>>"$out/gpu.log"
 
+log "self-play throughput rows (the CPU table's: 8 x 8, 16 x 8 and 4 x 32 scenes x agent slots)"
+timeout 240 $py benchmarks/training.py --json --chunks 4 --only "ppo-selfplay selfplay.max_agents=8,\
+ppo-selfplay selfplay.max_agents=8 algo.num_envs=16,ppo-selfplay selfplay.max_agents=32 algo.num_envs=4" \
+  >"$out/selfplay.json" 2>>"$out/gpu.log"
+
 log "a short learning run (default preset, ${learn_minutes} min wall-clock budget)"
 timeout $(( learn_minutes * 60 + 150 )) /tmp/vmax-gpu-venv/bin/vmax-sim train --out "$out/learn" --quiet \
   data.synthetic_train_scenarios=200 train.max_wall_minutes="$learn_minutes" train.total_env_steps=100000000 \
