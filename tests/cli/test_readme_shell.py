@@ -189,8 +189,11 @@ def _environment(tmp: Path) -> dict:
 
 def _serve_once(tmp: Path, env: dict) -> None:
     """`scenariomax view shards/ --serve` (port 0: any free one): the page answers, Ctrl-C stops it cleanly."""
+    # SIGINT back to its default in the child: a test run started in the background (`pytest &`) inherits it
+    # ignored, and Python keeps an ignored SIGINT ignored, so Ctrl-C would never reach the server
     server = subprocess.Popen(["scenariomax", "view", "shards/", "--serve", "--port", "0"], cwd=tmp, env=env,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         line = server.stdout.readline()
         url = re.search(r"http://\S+/", line)
