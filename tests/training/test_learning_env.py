@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import chex
 import jax
 import jax.numpy as jnp
@@ -16,6 +18,12 @@ from vmax_sim.env.learning import LearningEnv
 ENV = LearningEnv(EnvConfig(max_num_objects=8))
 
 
+@functools.lru_cache(maxsize=4)
+def jitted_reset(env: LearningEnv):
+    """env.reset compiled once per env: run eagerly, its metrics and observation took ~40 s of this file's time."""
+    return jax.jit(env.reset, static_argnums=1)
+
+
 def pool():
     scenarios = [cruising_scenario("cruise"), braking_scenario("brake"), cruising_scenario("slow", 8.0)]
     return scenarios_to_batch(scenarios, small_data_config(""))
@@ -24,7 +32,7 @@ def pool():
 def run(policy, steps: int, batch_size: int = 2, env: LearningEnv = ENV):
     """Steps `batch_size` episodes with policy(state) -> (B, A); returns the stacked StepOutputs."""
     scenarios = pool()
-    state = env.reset(scenarios, batch_size, jax.random.PRNGKey(0))
+    state = jitted_reset(env)(scenarios, batch_size, jax.random.PRNGKey(0))
 
     @jax.jit
     def roll(state):
@@ -67,7 +75,7 @@ def test_a_repeated_action_is_held_for_k_steps_and_stops_at_the_episode_end():
     repeat = LearningEnv(EnvConfig(max_num_objects=8), action_repeat=4)
     hold = lambda state: jnp.zeros((2, 2)) + repeat.core.dynamics.normalize(jnp.zeros(2))  # noqa: E731
     scenarios = pool()
-    state = repeat.reset(scenarios, 2, jax.random.PRNGKey(0))
+    state = jitted_reset(repeat)(scenarios, 2, jax.random.PRNGKey(0))
     after, out = jax.jit(lambda s: repeat.step(s, hold(s), scenarios))(state)
     np.testing.assert_array_equal(np.asarray(after.sim.timestep - state.sim.timestep), [4, 4])
     single, _ = run(hold, 4)  # the same action, one simulator step per transition
@@ -94,7 +102,7 @@ def test_finished_episodes_restart_on_the_next_pool_scenarios():
 
 def test_step_compiles_once():
     scenarios = pool()
-    state = ENV.reset(scenarios, 2, jax.random.PRNGKey(0))
+    state = jitted_reset(ENV)(scenarios, 2, jax.random.PRNGKey(0))
 
     @jax.jit
     @chex.assert_max_traces(n=1)
