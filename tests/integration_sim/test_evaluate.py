@@ -71,6 +71,7 @@ def test_no_termination_without_terminate_on():
     assert float(rollout.episode["overlap"]) == 1.0
 
 
+@pytest.mark.slow  # 8-9 s on 2 cores: the default suite stays under 10 minutes
 def test_batched_equals_unbatched(road_shards):
     one = evaluate("constant", small_data_config(road_shards, batch_size=1))
     three = evaluate("constant", small_data_config(road_shards, batch_size=3))

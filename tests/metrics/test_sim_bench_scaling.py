@@ -52,6 +52,7 @@ print(json.dumps({"waymax": "0.1.0", "jax": "0.0-fake", "device": "cpu:cpu", "ro
 """
 
 
+@pytest.mark.slow  # 8-9 s on 2 cores: the default suite stays under 10 minutes
 def test_rows_report_median_and_memory_per_scene(monkeypatch):
     monkeypatch.setattr(bench, "_device_peak_bytes", lambda: 123_000_000)  # what an accelerator's allocator reports
     results = run_bench(batch_sizes=(2,), num_objects=16, roadgraph_sizes=(2000,), steps=2, configs=("env",))

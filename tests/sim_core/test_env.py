@@ -111,6 +111,7 @@ def test_jitted_step_traces_once(batch):
     assert int(state.timestep) == 11
 
 
+@pytest.mark.slow  # 8-9 s on 2 cores: the default suite stays under 10 minutes
 def test_vmapped_batch_equals_separate_calls(batch):
     env = Environment(CONFIG)
     batched = BatchedEnvironment(env)
