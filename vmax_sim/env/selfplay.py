@@ -130,14 +130,15 @@ class SelfPlayEnv:
 
     # ------------------------------------------------------------------ one agent of one scene
 
-    def _measure(self, sim: SimulatorState, slot: jax.Array, arcs: jax.Array, key: jax.Array | None):
-        """The agent's step metrics and observation now."""
-        view = agent_view(sim, slot)
-        inputs = step_inputs(view, arcs)
+    def _queries(self, sim: SimulatorState, slot: jax.Array, arcs: jax.Array):
+        """The agent's shared queries and step metrics now (its observation reuses the queries)."""
+        inputs = step_inputs(agent_view(sim, slot), arcs)
         shared = shared_queries(inputs, self.metrics_config)
-        metrics = step_metrics(view.map_index, inputs, self.metrics_config, shared)
+        return shared, step_metrics(sim.map_index, inputs, self.metrics_config, shared)
+
+    def _observe(self, sim: SimulatorState, slot: jax.Array, shared, key: jax.Array | None) -> Observation:
         noise_key = key if key is not None and _has_noise(self.obs_config) else None
-        return metrics, sdc_observation(view, shared, self.obs_config, noise_key)
+        return sdc_observation(agent_view(sim, slot), shared, self.obs_config, noise_key)
 
     def _goal(self, sim: SimulatorState, slot: jax.Array) -> jax.Array:
         """The agent's last logged position within the episode window. (2,)"""
@@ -161,7 +162,7 @@ class SelfPlayEnv:
         present = jnp.concatenate([has_route[None], others_valid[:k - 1]])
         arcs = jax.vmap(lambda slot: reference_arcs(agent_view(sim, slot), self.env_config))(slots)
         goals = jax.vmap(lambda slot: self._goal(sim, slot))(slots)
-        metrics, observation = jax.vmap(lambda slot, a: self._measure(sim, slot, a, None))(slots, arcs)
+        shared, metrics = jax.vmap(lambda slot, a: self._queries(sim, slot, a))(slots, arcs)
         # an agent that starts overlapping another object or off the road (a car logged on a driveway, a box
         # touching its neighbour's) would end its episode at its first step, one that starts at its goal (logged
         # standing still) has nowhere to go: they replay their logs instead
@@ -172,6 +173,7 @@ class SelfPlayEnv:
         is_agent = jnp.zeros(sim.num_objects, bool).at[jnp.where(present, slots, sim.num_objects)].set(
             True, mode="drop")
         sim = sim.replace(object_metadata=sim.object_metadata.replace(is_controlled=is_agent, max_controlled=k))
+        observation = jax.vmap(lambda slot, q: self._observe(sim, slot, q, None))(slots, shared)
         none = jnp.zeros(sim.num_objects, bool)
         return sim, slots, present, present, none, none, goals, arcs, metrics, observation
 
@@ -196,7 +198,7 @@ class SelfPlayEnv:
         sim, acting, gone, still, metrics, reward, terminated, goal, flags = parts
         distance_before = self._goal_distance(sim, slots, goals)
         sim = self._move(sim, slots, acting, action, gone, still)
-        new_metrics = jax.vmap(lambda slot, a: self._measure(sim, slot, a, None)[0])(slots, arcs)
+        shared, new_metrics = jax.vmap(lambda slot, a: self._queries(sim, slot, a))(slots, arcs)
         crashed = jnp.zeros_like(acting)
         for name in self.env_config.terminate_on:
             crashed = crashed | (new_metrics[TERMINATION_METRICS[name]] > 0.5)
@@ -214,7 +216,8 @@ class SelfPlayEnv:
         gone = gone.at[jnp.where(reached | leaving, finished, sim.num_objects)].set(True, mode="drop")
         still = still.at[jnp.where(crashed & ~leaving, finished, sim.num_objects)].set(True, mode="drop")
         acting = acting & ~crashed & ~reached
-        return (sim, acting, gone, still, metrics, reward, terminated | crashed | reached, goal | reached, flags)
+        parts = (sim, acting, gone, still, metrics, reward, terminated | crashed | reached, goal | reached, flags)
+        return parts, shared
 
     @staticmethod
     def _goal_distance(sim: SimulatorState, slots: jax.Array, goals: jax.Array) -> jax.Array:
@@ -224,29 +227,33 @@ class SelfPlayEnv:
 
     def _advance(self, sim, slots, active, gone, still, goals, arcs, metrics, action, key):
         """One policy step of one scene: actions (K, A) held for `action_repeat` simulator steps, or until the
-        scene's time limit."""
+        scene's time limit. The observation reuses the last step's queries."""
         zeros = jnp.zeros_like(active)
         flags = {name: zeros for name in EPISODE_FLAGS}
         parts = (sim, active, gone, still, metrics, jnp.zeros(active.shape, jnp.float32), zeros, zeros, flags)
-        truncated_scene = jnp.zeros((), bool)
-        for _ in range(self.action_repeat):  # unrolled: repeats are few
-            running = ~truncated_scene
-            stepped = self._substep(parts, slots, arcs, goals, action)
-            keep = _selector(running)
+        parts, shared = self._substep(parts, slots, arcs, goals, action)
+        truncated_scene = self._time_is_up(parts[0])
+        for _ in range(self.action_repeat - 1):  # unrolled: repeats are few
+            keep = _selector(~truncated_scene)
+            stepped, new_shared = self._substep(parts, slots, arcs, goals, action)
             old_sim, new_sim = parts[0], stepped[0]
             # only the simulated trajectory and the timestep change: never select (copy) the map index
             sim = old_sim.replace(sim_trajectory=keep(new_sim.sim_trajectory, old_sim.sim_trajectory),
                                   timestep=keep(new_sim.timestep, old_sim.timestep),
                                   current_sim=keep(new_sim.current_sim, old_sim.current_sim))
-            parts = (sim, *keep(stepped[1:], parts[1:]))
-            truncated_scene = truncated_scene | (sim.timestep >= self.env_config.last_timestep) | sim.is_done
+            parts, shared = (sim, *keep(stepped[1:], parts[1:])), keep(new_shared, shared)
+            truncated_scene = truncated_scene | self._time_is_up(sim)
         sim, acting, gone, still, metrics, reward, terminated, goal, flags = parts
         flags = {**flags, "goal_reached": goal}
         truncated = active & ~terminated & truncated_scene
         keys = jax.random.split(key, slots.shape[0])
-        observation = jax.vmap(lambda slot, a, k: self._measure(sim, slot, a, k)[1])(slots, arcs, keys)
+        observation = jax.vmap(lambda slot, q, k: self._observe(sim, slot, q, k))(slots, shared, keys)
         scene_done = truncated_scene | ~jnp.any(acting)
         return sim, acting, gone, still, metrics, reward, terminated, truncated, flags, observation, scene_done
+
+    def _time_is_up(self, sim: SimulatorState) -> jax.Array:
+        """The scene reached its time limit or the end of its log. () bool"""
+        return (sim.timestep >= self.env_config.last_timestep) | sim.is_done
 
     # ------------------------------------------------------------------ batched API
 
