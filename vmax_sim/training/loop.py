@@ -63,8 +63,7 @@ def episode_stats(out: StepOutput | AgentStepOutput) -> dict[str, jax.Array]:
     return {"episodes": jnp.sum(done), "episode/return": jnp.sum(out.episode_return),
             "episode/length": jnp.sum(out.episode_length.astype(jnp.float32)),
             "episode/accuracy": jnp.sum(accurate), "episode/progress_ratio": jnp.sum(out.episode_progress),
-            **flags, "reward_sum": jnp.sum(out.reward * acting), "reward_count": jnp.sum(acting),
-            "agent_steps": jnp.sum(acting)}
+            **flags, "reward_sum": jnp.sum(out.reward * acting), "agent_steps": jnp.sum(acting)}
 
 
 def _sum_stats(stats: dict[str, jax.Array]) -> dict[str, jax.Array]:

@@ -268,8 +268,8 @@ def _host_scalars(stats: dict) -> dict[str, float]:
         if key.startswith("episode/"):
             total = values.pop(key)
             out[key] = total / episodes if episodes > 0 else math.nan
-    reward_sum, reward_count = values.pop("reward_sum"), values.pop("reward_count")
-    out["reward_mean"] = reward_sum / max(reward_count, 1.0)
+    reward_sum = values.pop("reward_sum")
+    out["reward_mean"] = reward_sum / max(values["agent_steps"], 1.0)  # a reward per acting agent and step
     out.update(values)
     return out
 
