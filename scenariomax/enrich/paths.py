@@ -143,13 +143,27 @@ def _lane_hits(lanes: Lanes, track: np.ndarray, radius: float) -> np.ndarray:
     return hits
 
 
-def _logged_change(track: np.ndarray, line_a: np.ndarray, cum_a: np.ndarray, line_b: np.ndarray,
+class _TrackOnLanes:
+    """The logged positions (m, 2) projected onto lanes, each lane once: the search asks for the same lane
+    again with every lane change from or into it. `of(lane)` -> (distance (m,), foot arc (m,))."""
+
+    def __init__(self, lanes: Lanes, track: np.ndarray):
+        self.lanes, self.track = lanes, track
+        self._done: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def of(self, lane: int) -> tuple[np.ndarray, np.ndarray]:
+        if lane not in self._done:
+            self._done[lane] = project_to_polyline(self.track, self.lanes.polyline(lane))[:2]
+        return self._done[lane]
+
+
+def _logged_change(on_lanes: _TrackOnLanes, lane_a: int, cum_a: np.ndarray, lane_b: int,
                    arc_from: float, settings: PathSettings) -> tuple[np.ndarray, np.ndarray] | None:
     """Where the log moves from lane A to lane B: (arcs along A, blend weights 0..1) or None."""
-    if len(track) < 3:
+    if len(on_lanes.track) < 3:
         return None
-    dist_a, arc_a, _ = project_to_polyline(track, line_a)
-    dist_b, _, _ = project_to_polyline(track, line_b)
+    dist_a, arc_a = on_lanes.of(lane_a)
+    dist_b, _ = on_lanes.of(lane_b)
     between = ((dist_a < settings.max_change_offset_m) & (dist_b < settings.max_change_offset_m)
                & (arc_a >= arc_from - 1.0) & (arc_a < cum_a[-1] - 1e-3))
     idx = np.flatnonzero(between)
@@ -189,12 +203,12 @@ def _direction_at(line: np.ndarray, cum: np.ndarray, arc: float) -> np.ndarray:
     return step / max(float(np.hypot(*step)), 1e-9)
 
 
-def _lane_change(lanes: Lanes, lane_a: int, arc_from: float, lane_b: int, track: np.ndarray,
+def _lane_change(lanes: Lanes, lane_a: int, arc_from: float, lane_b: int, on_lanes: _TrackOnLanes,
                  settings: PathSettings) -> tuple[_Piece, float] | None:
     """The piece from `arc_from` on A through the blend onto B, and the arc on B where it lands."""
     line_a, cum_a = lanes.polyline(lane_a), lanes.cumulative[lane_a]
     line_b, cum_b = lanes.polyline(lane_b), lanes.cumulative[lane_b]
-    logged = _logged_change(track, line_a, cum_a, line_b, arc_from, settings)
+    logged = _logged_change(on_lanes, lane_a, cum_a, lane_b, arc_from, settings)
     if logged is not None:
         arcs, weights = logged
     elif settings.unlogged_lane_changes:
@@ -262,6 +276,7 @@ def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], 
     """Candidate paths as piece sequences (depth-first, log-consistent branches first)."""
     target = (settings.points_per_path - 1) * settings.spacing_m
     hits = _lane_hits(lanes, track, settings.track_hit_radius_m)
+    on_lanes = _TrackOnLanes(lanes, track)
     # State: (pieces so far, length so far, lane, entry arc, lane changes used, lanes visited)
     stack = [((), 0.0, lane, arc, 0, (lane,)) for lane, arc in reversed(starts)]
     results: list[tuple[_Piece, ...]] = []
@@ -274,7 +289,7 @@ def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], 
             for other in graph.left[lane] + graph.right[lane]:
                 if other in visited:
                     continue
-                change = _lane_change(lanes, lane, arc, other, track, settings)
+                change = _lane_change(lanes, lane, arc, other, on_lanes, settings)
                 if change is not None:
                     piece, landing = change
                     children.append((hits[other], (pieces + (piece,), length + _piece_length(piece), other,
