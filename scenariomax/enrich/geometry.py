@@ -108,3 +108,69 @@ def slice_polyline(polyline: np.ndarray, cum: np.ndarray, start: float, stop: fl
 def segment_distances(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
     """Distance from each point (m, 2+) to a polyline (n, 2+). -> (m,)"""
     return project_to_polyline(points, polyline)[0]
+
+
+# --- many polylines at once ----------------------------------------------------------------------
+# Sources' maps hold hundreds of short polylines; numpy calls per polyline cost more than the maths. These
+# helpers work on polylines stored back to back ("runs": run r owns rows starts[r]:starts[r] + counts[r]) and
+# give every run the same bits as the one-polyline numpy call (np.cumsum, np.interp, np.linalg.norm).
+
+
+def run_starts(counts: np.ndarray) -> np.ndarray:
+    """First row of each run. (R,) -> (R,) int64"""
+    counts = np.asarray(counts, np.int64)
+    return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64) if len(counts) else counts
+
+
+def run_cumsum(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """np.cumsum within each run, bit for bit (a run's sum never carries the previous run's rounding).
+    values (n,) back to back, counts (R,) summing to n -> (n,)"""
+    values = np.asarray(values, np.float64)
+    counts = np.asarray(counts, np.int64)
+    out = np.empty_like(values)
+    if len(values) == 0:
+        return out
+    place = np.arange(len(values)) - np.repeat(run_starts(counts), counts)  # (n,) position in its run
+    run = np.repeat(np.arange(len(counts)), counts)  # (n,)
+    # Runs of similar length (within a factor 2) share a table, one column per run, padded with zeros:
+    # cumsum down the columns is the same sequential sum as per run, for all runs of the table at once.
+    size_class = np.ceil(np.log2(np.maximum(counts, 1))).astype(np.int64)  # (R,)
+    for cls in np.unique(size_class[counts > 0]):
+        members = np.flatnonzero(size_class == cls)  # (r,)
+        column = np.full(len(counts), -1, np.int64)
+        column[members] = np.arange(len(members))
+        rows = np.flatnonzero(column[run] >= 0)  # the values of these runs
+        table = np.zeros((int(counts[members].max()), len(members)))  # (longest run of the class, r)
+        table[place[rows], column[run[rows]]] = values[rows]
+        out[rows] = np.cumsum(table, axis=0)[place[rows], column[run[rows]]]
+    return out
+
+
+def run_interp(x: np.ndarray, x_run: np.ndarray, xp: np.ndarray, fp: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """np.interp(x[k], xp_r, fp_r) for every query k against its run r = x_run[k], bit for bit (numpy's
+    formula: fp[j] where x hits xp[j] or lies outside, else slope * (x - xp[j]) + fp[j]).
+    x (m,), x_run (m,) int, xp (n,) increasing within each run, fp (n,) or (n, d), counts (R,) >= 1 each
+    -> (m,) or (m, d)"""
+    x = np.asarray(x, np.float64)
+    xp, fp = np.asarray(xp, np.float64), np.asarray(fp, np.float64)
+    starts = run_starts(counts)
+    last = starts + np.asarray(counts, np.int64) - 1  # (R,)
+    # (run, value) pairs as complex numbers sort lexicographically: one exact searchsorted for all runs.
+    keys = np.repeat(np.arange(len(starts)), counts) + 1j * xp  # (n,)
+    j = np.searchsorted(keys, x_run + 1j * x, side="right") - 1  # (m,) last xp <= x in the run
+    j = np.clip(j, starts[x_run], last[x_run])  # left of the run: its first point (numpy's default)
+    nxt = np.minimum(j + 1, last[x_run])
+    if fp.ndim == 2:
+        x, xj, xn = x[:, None], xp[j][:, None], xp[nxt][:, None]
+    else:
+        xj, xn = xp[j], xp[nxt]
+    fj, fn = fp[j], fp[nxt]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = (fn - fj) / (xn - xj)
+        out = slope * (x - xj) + fj
+        retry = np.isnan(out)  # numpy retries from the right end, then takes fp[j] on a flat stretch
+        if retry.any():
+            out = np.where(retry, slope * (x - xn) + fn, out)
+            out = np.where(np.isnan(out) & (fj == fn), fj, out)
+    on_point = (xj == x) | (xj == xn) | (x < xj)  # hits xp[j], the run's last point, or lies left of the run
+    return np.where(on_point, fj, out)

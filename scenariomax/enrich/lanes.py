@@ -50,6 +50,14 @@ class Lanes:
         return np.vstack([tangents(self.polyline(k)) for k in range(self.num_lanes)])
 
     @functools.cached_property
+    def boxes(self) -> np.ndarray:  # (K, 4) float64 bounding box of each lane: min x, min y, max x, max y
+        if self.num_lanes == 0:
+            return np.zeros((0, 4))
+        starts = self.offsets[:-1]  # every lane has >= 1 point (extract_lanes keeps >= 2)
+        xy = self.points[:, :2]
+        return np.hstack([np.minimum.reduceat(xy, starts, axis=0), np.maximum.reduceat(xy, starts, axis=0)])
+
+    @functools.cached_property
     def tree(self) -> cKDTree:
         return cKDTree(self.points[:, :2] if len(self.points) else np.zeros((0, 2)))
 

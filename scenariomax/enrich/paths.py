@@ -143,21 +143,31 @@ def _lane_hits(lanes: Lanes, track: np.ndarray, radius: float) -> np.ndarray:
     return hits
 
 
-class _TrackOnLanes:
-    """The logged positions (m, 2) projected onto lanes, each lane once: the search asks for the same lane
-    again with every lane change from or into it. `of(lane)` -> (distance (m,), foot arc (m,))."""
+class _TrackNearLanes:
+    """The logged positions (m, 2) projected onto lanes, each lane once (the search asks for the same lane
+    again with every lane change from or into it), and only the positions that may lie within `radius` of
+    it: `of(lane)` -> (distance (m,), foot arc (m,)), exact where the distance is < `radius`, inf / nan
+    for the positions outside the lane's bounding box grown by `radius` (+1 m against rounding)."""
 
-    def __init__(self, lanes: Lanes, track: np.ndarray):
-        self.lanes, self.track = lanes, track
+    def __init__(self, lanes: Lanes, track: np.ndarray, radius: float):
+        self.lanes, self.track, self.radius = lanes, track, radius
         self._done: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def of(self, lane: int) -> tuple[np.ndarray, np.ndarray]:
         if lane not in self._done:
-            self._done[lane] = project_to_polyline(self.track, self.lanes.polyline(lane))[:2]
+            self._done[lane] = self._project(lane)
         return self._done[lane]
 
+    def _project(self, lane: int) -> tuple[np.ndarray, np.ndarray]:
+        low, high = self.lanes.boxes[lane, :2] - self.radius - 1.0, self.lanes.boxes[lane, 2:] + self.radius + 1.0
+        near = np.flatnonzero(((self.track >= low) & (self.track <= high)).all(axis=1))  # (k,)
+        dist, arc = np.full(len(self.track), np.inf), np.full(len(self.track), np.nan)
+        if near.size:  # each position's projection is computed on its own: a subset gives the same values
+            dist[near], arc[near], _ = project_to_polyline(self.track[near], self.lanes.polyline(lane))
+        return dist, arc
 
-def _logged_change(on_lanes: _TrackOnLanes, lane_a: int, cum_a: np.ndarray, lane_b: int,
+
+def _logged_change(on_lanes: _TrackNearLanes, lane_a: int, cum_a: np.ndarray, lane_b: int,
                    arc_from: float, settings: PathSettings) -> tuple[np.ndarray, np.ndarray] | None:
     """Where the log moves from lane A to lane B: (arcs along A, blend weights 0..1) or None."""
     if len(on_lanes.track) < 3:
@@ -203,7 +213,7 @@ def _direction_at(line: np.ndarray, cum: np.ndarray, arc: float) -> np.ndarray:
     return step / max(float(np.hypot(*step)), 1e-9)
 
 
-def _lane_change(lanes: Lanes, lane_a: int, arc_from: float, lane_b: int, on_lanes: _TrackOnLanes,
+def _lane_change(lanes: Lanes, lane_a: int, arc_from: float, lane_b: int, on_lanes: _TrackNearLanes,
                  settings: PathSettings) -> tuple[_Piece, float] | None:
     """The piece from `arc_from` on A through the blend onto B, and the arc on B where it lands."""
     line_a, cum_a = lanes.polyline(lane_a), lanes.cumulative[lane_a]
@@ -276,7 +286,7 @@ def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], 
     """Candidate paths as piece sequences (depth-first, log-consistent branches first)."""
     target = (settings.points_per_path - 1) * settings.spacing_m
     hits = _lane_hits(lanes, track, settings.track_hit_radius_m)
-    on_lanes = _TrackOnLanes(lanes, track)
+    on_lanes = _TrackNearLanes(lanes, track, settings.max_change_offset_m)
     # State: (pieces so far, length so far, lane, entry arc, lane changes used, lanes visited)
     stack = [((), 0.0, lane, arc, 0, (lane,)) for lane, arc in reversed(starts)]
     results: list[tuple[_Piece, ...]] = []

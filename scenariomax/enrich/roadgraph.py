@@ -12,6 +12,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from scenariomax.enrich.geometry import run_cumsum, run_interp, run_starts
+
 DEFAULT_SPACING_M = 1.0
 
 
@@ -68,33 +70,85 @@ def direction_vectors(xyz: np.ndarray) -> np.ndarray:
     return dirs
 
 
+def _prepared(line: MapPolyline, origin: np.ndarray | None) -> np.ndarray:
+    """One polyline's points as `resample_polyline` starts from them: float64, `origin` subtracted, a
+    polygon closed. -> (n, 3)"""
+    xyz = np.asarray(line.xyz, dtype=np.float64).reshape(-1, 3)
+    if origin is not None:
+        xyz = xyz - np.asarray(origin, np.float64)
+    if line.closed and len(xyz) > 2 and not np.allclose(xyz[0], xyz[-1]):
+        xyz = np.vstack([xyz, xyz[:1]])
+    return xyz
+
+
+def _norm2d(diff: np.ndarray) -> np.ndarray:
+    """np.linalg.norm(diff[:, :2], axis=1) with the same bits. (n, 2+) -> (n,)"""
+    return np.sqrt(diff[:, 0] * diff[:, 0] + diff[:, 1] * diff[:, 1])
+
+
+def resample_polylines(polylines: Sequence[np.ndarray], spacing: float = DEFAULT_SPACING_M) -> tuple[np.ndarray,
+                                                                                                    np.ndarray]:
+    """`resample_polyline` of many prepared polylines (see `_prepared`) at once, the same bits per polyline.
+    -> points (m, 3) float32 back to back, points per polyline (P,)"""
+    counts = np.array([len(xyz) for xyz in polylines], np.int64)  # (P,)
+    if counts.sum() == 0:
+        return np.zeros((0, 3), np.float32), counts
+    xyz = np.concatenate(polylines)  # (n, 3)
+    first = np.zeros(len(xyz), bool)
+    first[run_starts(counts)[counts > 0]] = True
+    # Drop repeated points (a step <= 1 micrometre from the previous raw point of the same polyline).
+    keep = first | np.concatenate([[True], _norm2d(np.diff(xyz, axis=0)) > 1e-6])
+    owner = np.repeat(np.arange(len(counts)), counts)[keep]
+    xyz = xyz[keep]  # (k, 3)
+    kept = np.bincount(owner, minlength=len(counts))  # (P,)
+    # Arc length along each polyline at each kept point: 0, then the running sum of its steps.
+    step = np.concatenate([[0.0], _norm2d(np.diff(xyz, axis=0))])
+    step[first[keep]] = 0.0
+    arc = run_cumsum(step, kept)  # (k,)
+    total = arc[np.minimum(run_starts(kept) + np.maximum(kept, 1) - 1, len(arc) - 1)]  # (P,) (unused where kept == 0)
+    # np.linspace(0, total, num): index * (total / (num - 1)), the last target exactly `total`.
+    num = np.where(kept >= 2, np.maximum(np.ceil(total / spacing).astype(np.int64), 1) + 1, kept)  # (P,)
+    target_owner = np.repeat(np.arange(len(counts)), num)  # (m,)
+    index = (np.arange(num.sum()) - np.repeat(run_starts(num), num)).astype(np.float64)  # (m,)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        targets = index * (total / np.maximum(num - 1, 1))[target_owner]
+    ends = run_starts(num) + num - 1
+    targets[ends[num > 0]] = total[num > 0]
+    has = kept > 0
+    points = run_interp(targets, np.searchsorted(np.flatnonzero(has), target_owner), arc, xyz, kept[has])
+    return points.astype(np.float32), num
+
+
+def _directions(points: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """`direction_vectors` of polylines stored back to back, the same bits. (m, 3), (P,) -> (m, 3) float32"""
+    dirs = np.zeros(points.shape, np.float32)
+    if len(points) < 2:
+        return dirs
+    diff = np.diff(points.astype(np.float64), axis=0)  # (m-1, 3)
+    norm = np.sqrt(diff[:, 0] * diff[:, 0] + diff[:, 1] * diff[:, 1] + diff[:, 2] * diff[:, 2])[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dirs[:-1] = np.where(norm > 1e-9, diff / np.maximum(norm, 1e-9), 0.0)
+    dirs[(run_starts(counts) + counts - 1)[counts > 0]] = 0.0  # each polyline's last point
+    return dirs
+
+
 def polylines_to_roadgraph(polylines: Sequence[MapPolyline], spacing: float = DEFAULT_SPACING_M,
                            origin: np.ndarray | None = None) -> dict:
     """Concatenated roadgraph arrays (unpadded): keys roadgraph_xyz, _dir, _type, _id, _valid,
-    _speed_limit, ready to pass to `Scenario(**...)`."""
-    xyz, dirs, types, ids, limits = [], [], [], [], []
-    for line in polylines:
-        points = resample_polyline(line.xyz, spacing, line.closed, origin)
-        if len(points) == 0:
-            continue
-        xyz.append(points)
-        dirs.append(direction_vectors(points))
-        types.append(np.full(len(points), line.feature_type, np.int64))
-        ids.append(np.full(len(points), line.feature_id, np.int64))
-        limits.append(np.full(len(points), line.speed_limit, np.float32))
-    if not xyz:
-        empty = np.zeros((0,), np.int64)
-        return dict(roadgraph_xyz=np.zeros((0, 3), np.float32), roadgraph_dir=np.zeros((0, 3), np.float32),
-                    roadgraph_type=empty, roadgraph_id=empty, roadgraph_valid=np.zeros(0, bool),
-                    roadgraph_speed_limit=np.zeros(0, np.float32))
-    xyz_all = np.concatenate(xyz)
+    _speed_limit, ready to pass to `Scenario(**...)`. Every polyline is resampled as `resample_polyline`
+    and given `direction_vectors`, all in one pass."""
+    points, counts = resample_polylines([_prepared(line, origin) for line in polylines], spacing)
+
+    def per_point(values, dtype) -> np.ndarray:
+        return np.repeat(np.asarray(values, dtype), counts)
+
     return dict(
-        roadgraph_xyz=xyz_all,
-        roadgraph_dir=np.concatenate(dirs),
-        roadgraph_type=np.concatenate(types),
-        roadgraph_id=np.concatenate(ids),
-        roadgraph_valid=np.ones(len(xyz_all), bool),
-        roadgraph_speed_limit=np.concatenate(limits),
+        roadgraph_xyz=points,
+        roadgraph_dir=_directions(points, counts),
+        roadgraph_type=per_point([line.feature_type for line in polylines], np.int64),
+        roadgraph_id=per_point([line.feature_id for line in polylines], np.int64),
+        roadgraph_valid=np.ones(len(points), bool),
+        roadgraph_speed_limit=per_point([line.speed_limit for line in polylines], np.float32),
     )
 
 
