@@ -25,7 +25,7 @@ import re
 import shutil
 import time
 from collections import deque
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
@@ -309,6 +309,9 @@ class _ShardSink:
         if path.exists() and path.stat().st_size >= state["bytes"]:
             self.open = _OpenShard(path, state["num_records"], keep_bytes=state["bytes"])
             return
+        if not path.exists() and state["bytes"] == 0:  # killed after listing the shard, before creating it
+            self.open = _OpenShard(path)
+            return
         raise ConversionError(f"{path}: the interrupted shard is missing or shorter than its checkpoint; "
                               "convert again with --overwrite")
 
@@ -579,18 +582,32 @@ def _results_process(source: Source, units: Sequence[str], settings: ConvertSett
                                       "rerun with --resume to continue") from None
 
 
+def ray_init_options(address: str | None, environ: Mapping[str, str], workers: int) -> dict:
+    """`ray.init` keywords: join the cluster `--address` or RAY_ADDRESS names (`ray job submit` sets it; Ray
+    refuses `num_cpus` when joining), else start a local instance with one CPU per worker."""
+    address = address or environ.get("RAY_ADDRESS")
+    if address:
+        return {"address": address}
+    return {"num_cpus": workers, "include_dashboard": False}
+
+
+def ray_window(requested_workers: int | None, cluster_cpus: float) -> int:
+    """Units in flight: two per cluster CPU, or per `--workers` when given. The driver's own core count says
+    nothing about a cluster's, and a window sized by it would leave most of a large cluster idle."""
+    slots = requested_workers or int(cluster_cpus) or 1
+    return 2 * slots
+
+
 def _results_ray(source: Source, units: Sequence[str], settings: ConvertSettings, workers: int) -> Iterator[UnitResult]:
     try:
         import ray  # optional extra
     except ImportError:
         raise ConversionError("--engine ray needs the ray extra: pip install 'vmax[ray]'") from None
     if not ray.is_initialized():
-        if settings.ray_address:
-            ray.init(address=settings.ray_address, ignore_reinit_error=True, log_to_driver=False)
-        else:
-            ray.init(num_cpus=workers, ignore_reinit_error=True, log_to_driver=False, include_dashboard=False)
+        ray.init(**ray_init_options(settings.ray_address, os.environ, workers), ignore_reinit_error=True,
+                 log_to_driver=False)
     remote = ray.remote(convert_unit_in_memory)
-    window = max(2 * workers, 2)  # bounded number of units in flight
+    window = ray_window(settings.workers, ray.cluster_resources().get("CPU", 0))
     refs: list = []
     next_unit = 0
     while next_unit < len(units) or refs:

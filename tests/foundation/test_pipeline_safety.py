@@ -141,6 +141,32 @@ def test_a_full_disk_is_one_line_and_stays_resumable(tmp_path, monkeypatch):
     assert resumed.num_scenarios == 23 and _shard_bytes(out) == _shard_bytes(tmp_path / "ref")
 
 
+def test_a_kill_between_listing_a_shard_and_creating_it_stays_resumable(tmp_path, monkeypatch):
+    """The manifest names the next shard before its file exists (no unlisted file is ever left); a kill in
+    between (found by tests/interop/test_ray_cluster.py) must resume, not ask for --overwrite."""
+    import scenariomax.pipeline as pipeline
+
+    class Killed(BaseException):
+        pass
+
+    real_open = pipeline._OpenShard
+
+    def killed_at_the_third_shard(path, *args, **kwargs):
+        if path.name.endswith("-00002.tfrecord") and not kwargs and not args:
+            raise Killed
+        return real_open(path, *args, **kwargs)
+
+    out = tmp_path / "o"
+    monkeypatch.setattr(pipeline, "_OpenShard", killed_at_the_third_shard)
+    with pytest.raises(Killed):
+        convert(ToySource(), _settings(out))
+    assert not list(out.glob(".sealing-*")) and json.loads((out / "manifest.json").read_text())["open_shard"]
+    monkeypatch.setattr(pipeline, "_OpenShard", real_open)
+    resumed = convert(ToySource(), _settings(out, resume=True))
+    convert(ToySource(), _settings(tmp_path / "ref"))
+    assert resumed.num_scenarios == 23 and _shard_bytes(out) == _shard_bytes(tmp_path / "ref")
+
+
 def test_a_source_with_no_scenarios_is_not_a_success(tmp_path):
     result = convert(ToySource(num_units=2, per_unit=0), _settings(tmp_path / "o"))
     assert result.num_scenarios == 0 and not result.ok
