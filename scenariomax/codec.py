@@ -48,7 +48,7 @@ def _pad_to(array: np.ndarray, shape: tuple[int, ...], pad, key: str) -> np.ndar
     return out
 
 
-def _field_value(scenario: Scenario, spec: FeatureSpec, sizes: Sizes):
+def _field_value(scenario: Scenario, spec: FeatureSpec, sizes: Sizes, dims: dict[str, int]):
     value = getattr(scenario, spec.field)
     if spec.dtype == "bytes":
         return [value.encode()]
@@ -63,7 +63,7 @@ def _field_value(scenario: Scenario, spec: FeatureSpec, sizes: Sizes):
                 array = array.T
     if spec.field == "path_on_route":
         array = array[:, None]
-    shape = spec.resolved_shape(sizes.as_dict())
+    shape = spec.resolved_shape(dims)
     return _pad_to(array.astype(spec.numpy_dtype), shape, spec.pad, spec.key)
 
 
@@ -72,7 +72,8 @@ def scenario_to_features(scenario: Scenario, sizes: Sizes | None = None) -> dict
     if scenario.num_timesteps != sizes.num_timesteps:
         raise SchemaError(f"scenario {scenario.scenario_id} has {scenario.num_timesteps} steps, "
                           f"the schema wants {sizes.num_timesteps}")
-    return {spec.key: _field_value(scenario, spec, sizes) for spec in load_schema().features}
+    dims = sizes.as_dict()  # once: it copies the dataclass
+    return {spec.key: _field_value(scenario, spec, sizes, dims) for spec in load_schema().features}
 
 
 def encode_scenario(scenario: Scenario, sizes: Sizes | None = None) -> bytes:

@@ -64,27 +64,104 @@ class ExampleError(ValueError):
     """Bytes that are not a valid tf.Example."""
 
 
+def _varint(value: int) -> bytes:
+    """One protobuf varint (value >= 0)."""
+    out = bytearray()
+    while value > 0x7F:
+        out.append((value & 0x7F) | 0x80)
+        value >>= 7
+    out.append(value)
+    return bytes(out)
+
+
+def _header(tag: int, length: int) -> bytes:
+    """The start of a length-delimited field: tag byte, length varint."""
+    return bytes((tag,)) + _varint(length)
+
+
+def _size(chunks: list[bytes]) -> int:
+    return sum(map(len, chunks))
+
+
+# A varint takes one more byte at each of these values (as uint64).
+_VARINT_STEPS = np.left_shift(np.uint64(1), np.arange(7, 64, 7, dtype=np.uint64))  # (9,)
+
+
+def _varints(v: np.ndarray) -> bytes:
+    """Packed varints of uint64 values (the bit patterns of int64s). (n,) -> bytes"""
+    if v.size == 0 or v.max() < 0x80:  # masks, types, small ids: one byte each
+        return v.astype(np.uint8).tobytes()
+    length = np.searchsorted(_VARINT_STEPS, v, side="right") + 1  # (n,) bytes per value, 1..10
+    ends = np.cumsum(length)  # (n,) end of each value's bytes
+    out = np.empty(int(ends[-1]), np.uint8)
+    # Values of one byte length together (a shard has few: 1, 2, 3 and 10 for -1).
+    for size in np.flatnonzero(np.bincount(length)):
+        rows = np.flatnonzero(length == size)  # (r,)
+        shifts = np.arange(0, 7 * size, 7, dtype=np.uint64)  # (size,)
+        groups = ((v[rows, None] >> shifts) & np.uint64(0x7F)).astype(np.uint8)  # (r, size) 7-bit groups
+        groups[:, :-1] |= 0x80  # continuation bit on every byte of a value but its last
+        out[(ends[rows] - size)[:, None] + np.arange(size)] = groups
+    return out.tobytes()
+
+
+def varints(values: np.ndarray) -> bytes:
+    """Packed protobuf varints of int64 values, as protobuf writes them (a negative value as its 64-bit two's
+    complement: 10 bytes). (n,) -> bytes"""
+    v = np.ascontiguousarray(values, np.int64).view(np.uint64)  # (n,)
+    if v.size == 0:
+        return b""
+    # Shard arrays end in padding (-1: 10 bytes each): the trailing run of one value is one varint repeated.
+    differs = np.flatnonzero(v != v[-1])  # (k,)
+    head = int(differs[-1]) + 1 if differs.size else 0
+    return _varints(v[:head]) + _varints(v[-1:]) * (len(v) - head)
+
+
+def _feature_chunks(value: FeatureValue) -> list[bytes]:
+    """The serialised Feature message of one value, in pieces (joined once for the whole record: a 2 MB
+    record is not copied at every level of nesting)."""
+    if isinstance(value, (bytes, str)):
+        value = [value]
+    if isinstance(value, list):
+        items = [v.encode() if isinstance(v, str) else bytes(v) for v in value]
+        inner = [part for item in items for part in (_header(0x0A, len(item)), item)]  # BytesList.value
+        return [_header(0x0A, _size(inner)), *inner]  # Feature.bytes_list
+    array = np.asarray(value)
+    if array.dtype.kind == "f":
+        tag, data = 0x12, array.astype("<f4", copy=False).ravel().tobytes()  # Feature.float_list
+    elif array.dtype.kind in "iub":
+        tag, data = 0x1A, varints(array.ravel())  # Feature.int64_list
+    else:
+        raise TypeError(f"unsupported dtype {array.dtype}")
+    inner = [_header(0x0A, len(data)), data] if data else []  # packed value; nothing when empty
+    return [_header(tag, _size(inner)), *inner]
+
+
+def _map_order(key: str) -> bytes:
+    """Sort key of map entries as protobuf's (upb) deterministic serialisation orders them: bytewise, and a
+    key that is a prefix of another after it (0xFF never occurs in UTF-8)."""
+    return key.encode() + b"\xff"
+
+
 def encode_example(features: Mapping[str, FeatureValue]) -> bytes:
     """Serialises {key: array} to tf.Example bytes. float arrays -> FloatList, integer/bool arrays
     -> Int64List, bytes/str (or lists of them) -> BytesList. Keys are written sorted, so equal
-    inputs give byte-identical output."""
-    example = Example()
-    feature_map = example.features.feature
-    for key in sorted(features):
-        value = features[key]
-        if isinstance(value, (bytes, str)):
-            value = [value]
-        if isinstance(value, list):
-            feature_map[key].bytes_list.value.extend(v.encode() if isinstance(v, str) else bytes(v) for v in value)
-            continue
-        array = np.asarray(value)
-        if array.dtype.kind == "f":
-            feature_map[key].float_list.value.extend(array.astype(np.float32, copy=False).ravel().tolist())
-        elif array.dtype.kind in "iub":
-            feature_map[key].int64_list.value.extend(array.astype(np.int64, copy=False).ravel().tolist())
-        else:
-            raise TypeError(f"feature {key!r}: unsupported dtype {array.dtype}")
-    return example.SerializeToString(deterministic=True)
+    inputs give byte-identical output.
+
+    The wire format is written directly (numpy bytes and varints) rather than through the protobuf message:
+    the message would turn a 2 MB record into a million Python numbers first. The bytes are those of
+    `Example.SerializeToString(deterministic=True)` (tests compare them)."""
+    chunks: list[bytes] = []
+    for key in sorted(features, key=_map_order):
+        try:
+            feature = _feature_chunks(features[key])
+        except TypeError as error:
+            raise TypeError(f"feature {key!r}: {error}") from None
+        name = key.encode()
+        entry = [_header(0x0A, len(name)), name, _header(0x12, _size(feature)), *feature]  # map entry: key, value
+        chunks += [_header(0x0A, _size(entry)), *entry]  # Features.feature
+    if not chunks:
+        return b""
+    return b"".join([_header(0x0A, _size(chunks)), *chunks])  # Example.features
 
 
 def decode_example(data: bytes) -> dict[str, FeatureValue]:
