@@ -7,6 +7,7 @@ with the road on their left) and `LaneLinks`; traffic-light lane states become (
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Iterator
 
 import numpy as np
@@ -48,6 +49,8 @@ ROAD_EDGE_TYPES = {proto.ROAD_EDGE_UNKNOWN: sch.RG_ROAD_EDGE_BOUNDARY,
 KNOWN_OBJECT_TYPES = (sch.OBJECT_TYPE_VEHICLE, sch.OBJECT_TYPE_PEDESTRIAN, sch.OBJECT_TYPE_CYCLIST,
                       sch.OBJECT_TYPE_OTHER)
 _STATE_FIELDS = ("center_x", "center_y", "center_z", "length", "width", "height", "heading", "velocity_x", "velocity_y")
+_STATE_GETTER = operator.attrgetter(*_STATE_FIELDS, "valid")
+_POINT_GETTER = operator.attrgetter("x", "y", "z")
 
 
 class ScenarioBuildError(ValueError):
@@ -68,28 +71,32 @@ def track_arrays(message) -> dict[str, np.ndarray]:
     """Per-track state arrays over the whole log: (N, T) float64 for each state field, (N, T) bool valid."""
     num_steps = len(message.timestamps_seconds) or max((len(t.states) for t in message.tracks), default=0)
     num_tracks = len(message.tracks)
-    values = np.full((len(_STATE_FIELDS), num_tracks, num_steps), -1.0)
-    valid = np.zeros((num_tracks, num_steps), bool)
-    for row, track in enumerate(message.tracks):
+    for track in message.tracks:
         if len(track.states) != num_steps:
             raise ScenarioBuildError(f"track {track.id} has {len(track.states)} states, expected {num_steps}")
-        for step, state in enumerate(track.states):
-            if state.valid:
-                valid[row, step] = True
-                values[:, row, step] = [getattr(state, name) for name in _STATE_FIELDS]
+    # Every state read in one C-level pass (attrgetter: the fields, then valid) instead of one getattr per
+    # field and step; one array conversion for the whole log.
+    states = [state for track in message.tracks for state in map(_STATE_GETTER, track.states)]
+    table = np.array(states, np.float64).reshape(num_tracks, num_steps, len(_STATE_FIELDS) + 1)  # (N, T, F + 1)
+    valid = table[:, :, -1] != 0  # (N, T)
+    values = np.where(valid[:, :, None], table[:, :, :-1], -1.0).transpose(2, 0, 1)  # (F, N, T)
     out = dict(zip(_STATE_FIELDS, values))
     out["valid"] = valid
     return out
 
 
 # --- map -----------------------------------------------------------------------------------------
-def _points(points) -> np.ndarray:
-    return np.array([(p.x, p.y, p.z) for p in points], np.float64).reshape(-1, 3)
+def _point_arrays(containers: list) -> list[np.ndarray]:
+    """The points of every map feature, converted in one pass: (n_i, 3) float64 each."""
+    counts = [len(points) for points in containers]
+    rows = [xyz for points in containers for xyz in map(_POINT_GETTER, points)]
+    table = np.array(rows, np.float64).reshape(-1, 3)  # (sum n_i, 3)
+    return np.split(table, np.cumsum(counts)[:-1]) if containers else []
 
 
 def map_polylines(message) -> tuple[list[MapPolyline], list[LaneLinks]]:
     """Map features -> polylines (road edges oriented, road on the left) and lane links."""
-    polylines: list[MapPolyline] = []
+    features: list[tuple] = []  # (id, roadgraph type, points container, speed limit, closed)
     links: list[LaneLinks] = []
     for feature in message.map_features:
         kind = feature.WhichOneof("feature_data")
@@ -97,24 +104,26 @@ def map_polylines(message) -> tuple[list[MapPolyline], list[LaneLinks]]:
         if kind == "lane":
             lane = feature.lane
             limit = lane.speed_limit_mph * MPH_TO_MPS if lane.speed_limit_mph > 0 else -1.0
-            polylines.append(MapPolyline(fid, LANE_TYPES.get(lane.type, sch.RG_LANE_SURFACE_STREET),
-                                         _points(lane.polyline), speed_limit=float(limit)))
+            features.append((fid, LANE_TYPES.get(lane.type, sch.RG_LANE_SURFACE_STREET), lane.polyline,
+                             float(limit), False))
             links.append(LaneLinks(fid, successors=list(lane.exit_lanes), predecessors=list(lane.entry_lanes),
                                    left_neighbors=[n.feature_id for n in lane.left_neighbors],
                                    right_neighbors=[n.feature_id for n in lane.right_neighbors]))
         elif kind == "road_line":
-            polylines.append(MapPolyline(fid, ROAD_LINE_TYPES.get(feature.road_line.type, 0),
-                                         _points(feature.road_line.polyline)))
+            features.append((fid, ROAD_LINE_TYPES.get(feature.road_line.type, 0), feature.road_line.polyline,
+                             -1.0, False))
         elif kind == "road_edge":
-            polylines.append(MapPolyline(fid, ROAD_EDGE_TYPES.get(feature.road_edge.type, sch.RG_ROAD_EDGE_BOUNDARY),
-                                         _points(feature.road_edge.polyline)))
+            features.append((fid, ROAD_EDGE_TYPES.get(feature.road_edge.type, sch.RG_ROAD_EDGE_BOUNDARY),
+                             feature.road_edge.polyline, -1.0, False))
         elif kind == "stop_sign":
-            polylines.append(MapPolyline(fid, sch.RG_STOP_SIGN, _points([feature.stop_sign.position])))
+            features.append((fid, sch.RG_STOP_SIGN, [feature.stop_sign.position], -1.0, False))
         elif kind in ("crosswalk", "speed_bump", "driveway"):
             rg_type = {"crosswalk": sch.RG_CROSSWALK, "speed_bump": sch.RG_SPEED_BUMP,
                        "driveway": sch.RG_DRIVEWAY}[kind]
-            polylines.append(MapPolyline(fid, rg_type, _points(getattr(feature, kind).polygon), closed=True))
-    polylines = [p for p in polylines if len(p.xyz)]
+            features.append((fid, rg_type, getattr(feature, kind).polygon, -1.0, True))
+    points = _point_arrays([container for _, _, container, _, _ in features])
+    polylines = [MapPolyline(fid, rg_type, xyz, speed_limit=limit, closed=closed)
+                 for (fid, rg_type, _, limit, closed), xyz in zip(features, points) if len(xyz)]
     return orient_road_edges(polylines, sch.ROAD_EDGE_TYPES, sch.LANE_TYPES), links
 
 
