@@ -34,10 +34,12 @@ def run_index(runs: np.ndarray, size: int) -> np.ndarray:
 
 def arc_lengths(xy: np.ndarray) -> np.ndarray:
     """Cumulative 2-D distance along a polyline, 0 at the first point. (n, 2+) -> (n,)"""
-    if len(xy) == 0:
-        return np.zeros(0)
-    steps = np.linalg.norm(np.diff(np.asarray(xy, np.float64)[:, :2], axis=0), axis=1)
-    return np.concatenate([[0.0], np.cumsum(steps)])
+    xy = np.asarray(xy, np.float64)
+    out = np.zeros(len(xy))
+    if len(xy) > 1:
+        dx, dy = xy[1:, 0] - xy[:-1, 0], xy[1:, 1] - xy[:-1, 1]  # (n-1,)
+        np.cumsum(np.sqrt(dx * dx + dy * dy), out=out[1:])  # the bits of norm(diff(xy[:, :2]), axis=1)
+    return out
 
 
 def unit(vectors: np.ndarray) -> np.ndarray:
@@ -70,7 +72,8 @@ def project_to_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.nd
     px, py = pts[:, 0:1], pts[:, 1:2]  # (m, 1)
     ax, ay = line[:-1, 0], line[:-1, 1]  # (n-1,) segment starts
     sx, sy = line[1:, 0] - ax, line[1:, 1] - ay  # (n-1,) segment vectors
-    seg_len2 = np.maximum(sx * sx + sy * sy, 1e-12)  # (n-1,)
+    raw_len2 = sx * sx + sy * sy  # (n-1,)
+    seg_len2 = np.maximum(raw_len2, 1e-12)
     frac = (px - ax) * sx
     frac += (py - ay) * sy
     frac /= seg_len2
@@ -85,7 +88,8 @@ def project_to_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.nd
     dist2 += dy  # (m, n-1) squared distance to each segment
     best = dist2.argmin(axis=1)
     rows = np.arange(len(pts))
-    cum = arc_lengths(line)
+    cum = np.zeros(len(line))  # arc_lengths(line), from the segment lengths at hand
+    np.cumsum(np.sqrt(raw_len2), out=cum[1:])
     arc = cum[best] + frac[rows, best] * np.sqrt(seg_len2[best])
     return np.sqrt(dist2[rows, best]), arc, np.stack([foot_x[rows, best], foot_y[rows, best]], axis=1)
 

@@ -9,7 +9,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from scenariomax import schema as sch
-from scenariomax.enrich.geometry import arc_lengths, polyline_runs, tangents
+from scenariomax.enrich.geometry import polyline_runs, run_cumsum, unit
 from scenariomax.scenario import Scenario
 
 
@@ -31,9 +31,18 @@ class Lanes:
         return self.points[self.offsets[lane]:self.offsets[lane + 1]]
 
     @functools.cached_property
+    def counts(self) -> np.ndarray:  # (K,) int64 points per lane
+        return np.diff(self.offsets)
+
+    @functools.cached_property
     def cumulative(self) -> tuple[np.ndarray, ...]:
-        """Arc length along each lane at each of its points."""
-        return tuple(arc_lengths(self.polyline(k)) for k in range(self.num_lanes))
+        """Arc length along each lane at each of its points (the bits of `arc_lengths` per lane, all lanes in
+        one pass)."""
+        if len(self.points) == 0:
+            return tuple(np.zeros(0) for _ in range(self.num_lanes))
+        step = np.concatenate([[0.0], _norm2d(np.diff(self.points, axis=0))])  # (P,) from the previous point
+        step[self.offsets[:-1][self.counts > 0]] = 0.0  # each lane starts at 0
+        return tuple(np.split(run_cumsum(step, self.counts), self.offsets[1:-1]))
 
     @functools.cached_property
     def lengths(self) -> np.ndarray:  # (K,) float64
@@ -47,7 +56,14 @@ class Lanes:
     def point_tangent(self) -> np.ndarray:  # (P, 2) unit direction of travel at each point
         if self.num_lanes == 0:
             return np.zeros((0, 2))
-        return np.vstack([tangents(self.polyline(k)) for k in range(self.num_lanes)])
+        # The bits of `tangents` per lane, all lanes in one pass: each point the direction of its segment to
+        # the next point, a lane's last point that of the segment before it (a one-point lane: zeros).
+        seg = unit(np.diff(self.points[:, :2], axis=0))  # (P-1, 2); rows between two lanes unused
+        row = np.arange(len(self.points))
+        row[self.offsets[1:][self.counts > 0] - 1] -= 1
+        out = seg[np.clip(row, 0, max(len(seg) - 1, 0))] if len(seg) else np.zeros((len(self.points), 2))
+        out[np.repeat(self.counts < 2, self.counts)] = 0.0
+        return out
 
     @functools.cached_property
     def boxes(self) -> np.ndarray:  # (K, 4) float64 bounding box of each lane: min x, min y, max x, max y
@@ -64,6 +80,11 @@ class Lanes:
     @functools.cached_property
     def index_of(self) -> dict[int, int]:
         return {int(lane_id): k for k, lane_id in enumerate(self.ids)}
+
+
+def _norm2d(diff: np.ndarray) -> np.ndarray:
+    """np.linalg.norm(diff[:, :2], axis=1) with the same bits. (n, 2+) -> (n,)"""
+    return np.sqrt(diff[:, 0] * diff[:, 0] + diff[:, 1] * diff[:, 1])
 
 
 def extract_lanes(scenario: Scenario) -> Lanes:

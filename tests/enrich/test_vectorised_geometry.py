@@ -90,3 +90,19 @@ def test_roadgraph_matches_the_per_polyline_resampling(seed):
         np.testing.assert_array_equal(road["roadgraph_xyz"], xyz)
         np.testing.assert_array_equal(road["roadgraph_dir"], dirs)
         assert road["roadgraph_xyz"].dtype == np.float32 and len(road["roadgraph_id"]) == len(xyz)
+
+
+def test_lane_arcs_and_tangents_match_the_per_lane_helpers():
+    from scenariomax.enrich.geometry import tangents
+    from scenariomax.enrich.lanes import Lanes
+
+    rng = np.random.default_rng(2)
+    counts = np.array([1, 2, 17, 5, 64, 3])
+    points = np.concatenate([np.cumsum(rng.normal(size=(c, 3)), 0) * 30 + rng.uniform(-1e4, 1e4, 3) for c in counts])
+    lanes = Lanes(np.arange(6), np.zeros(6, np.int64), np.concatenate([[0], np.cumsum(counts)]), points)
+    for k in range(6):
+        line = lanes.polyline(k)
+        steps = np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1)
+        np.testing.assert_array_equal(lanes.cumulative[k], np.concatenate([[0.0], np.cumsum(steps)]))
+        np.testing.assert_array_equal(arc_lengths(line), lanes.cumulative[k])
+    np.testing.assert_array_equal(lanes.point_tangent, np.vstack([tangents(lanes.polyline(k)) for k in range(6)]))
