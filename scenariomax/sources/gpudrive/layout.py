@@ -209,31 +209,39 @@ class _Fields:
     def numbers(self, value: object, where: str) -> np.ndarray:
         """A list of numbers. -> (k,) float64"""
         values = self.items(value, where)
-        for index, item in enumerate(values):
-            if type(item) not in (int, float):
-                self.fail(f"{where}[{index}]", f"expected a number, found {_kind(item)}")
+        if not {type(item) for item in values} <= {int, float}:  # one pass; then find the culprit
+            for index, item in enumerate(values):
+                if type(item) not in (int, float):
+                    self.fail(f"{where}[{index}]", f"expected a number, found {_kind(item)}")
         return self._array(values, where)
 
     def points(self, value: object, where: str, names: tuple[str, ...]) -> np.ndarray:
         """A list of {x, y[, z]} objects. -> (k, len(names)) float64; an absent 'z' is NaN."""
         values = self.items(value, where)
-        try:
-            rows = [tuple(p[name] if name != "z" else p.get("z", NO_Z) for name in names) for p in values]
+        try:  # the common layouts spelled out: a generator per point costs more than the parsing
+            if names == ("x", "y", "z"):
+                rows = [(p["x"], p["y"], p.get("z", NO_Z)) for p in values]
+            elif names == ("x", "y"):
+                rows = [(p["x"], p["y"]) for p in values]
+            else:
+                rows = [tuple(p[name] if name != "z" else p.get("z", NO_Z) for name in names) for p in values]
         except (TypeError, KeyError, AttributeError):
             bad = next((i for i, p in enumerate(values)
                         if not isinstance(p, Mapping) or "x" not in p or "y" not in p), 0)
             self.fail(f"{where}[{bad}]", "expected an object with numeric 'x' and 'y'")
-        for index, row in enumerate(rows):
-            if any(type(item) not in (int, float) for item in row):
-                self.fail(f"{where}[{index}]", "expected numeric coordinates")
+        if not {type(item) for row in rows for item in row} <= {int, float}:  # one pass; then find the culprit
+            for index, row in enumerate(rows):
+                if any(type(item) not in (int, float) for item in row):
+                    self.fail(f"{where}[{index}]", "expected numeric coordinates")
         return self._array(rows, where).reshape(len(rows), len(names))
 
     def flags(self, value: object, where: str) -> np.ndarray:
         """A list of booleans (0 / 1 accepted). -> (k,) bool"""
         values = self.items(value, where)
-        for index, item in enumerate(values):
-            if item not in (True, False) or type(item) not in (bool, int):
-                self.fail(f"{where}[{index}]", f"expected true or false, found {_kind(item)}")
+        if not ({type(item) for item in values} <= {bool, int} and set(values) <= {0, 1}):  # one pass, then
+            for index, item in enumerate(values):  # find the culprit
+                if item not in (True, False) or type(item) not in (bool, int):
+                    self.fail(f"{where}[{index}]", f"expected true or false, found {_kind(item)}")
         return np.array(values, bool).reshape(len(values))
 
     def _array(self, rows: list, where: str) -> np.ndarray:
