@@ -9,7 +9,6 @@ steps that are not 0.1 s apart reported (never resampled here: sources that can 
 
 from __future__ import annotations
 
-import warnings
 from typing import Any
 
 import numpy as np
@@ -125,10 +124,8 @@ def wider_than_long(length: np.ndarray, width: np.ndarray, types: np.ndarray,
     length, width = np.asarray(length, np.float64), np.asarray(width, np.float64)
     if length.ndim == 2:
         mask = np.ones(length.shape, bool) if valid is None else np.asarray(valid, bool)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # an object never valid: all-NaN median
-            length = np.nanmedian(np.where(mask, length, np.nan), axis=1)
-            width = np.nanmedian(np.where(mask, width, np.nan), axis=1)
+        length = _nanmedian_last(np.where(mask, length, np.nan))  # an object never valid: NaN
+        width = _nanmedian_last(np.where(mask, width, np.nan))
     with np.errstate(invalid="ignore"):
         wide = np.isfinite(length) & np.isfinite(width) & (length > 0) & (width > SWAP_RATIO * length)
     return wide & np.isin(types, SWAP_CHECKED_TYPES)
@@ -145,9 +142,8 @@ def difference_noise(step: np.ndarray, pair: np.ndarray) -> np.ndarray:
     """Median change between consecutive position differences of each track, m/s. (N, T-1, 2), (N, T-1) -> (N,)"""
     both = pair[:, 1:] & pair[:, :-1]  # (N, T-2) three consecutive usable steps
     change = np.where(both, np.linalg.norm(np.diff(step, axis=1), axis=-1), np.nan)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # a track without three consecutive steps
-        noise = np.nanmedian(change, axis=1) if change.shape[1] else np.full(len(change), np.nan)
+    # A track without three consecutive steps: NaN, then 0.
+    noise = _nanmedian_last(change) if change.shape[1] else np.full(len(change), np.nan)
     return np.nan_to_num(noise, nan=0.0)
 
 
@@ -189,9 +185,21 @@ def local_median(values: np.ndarray, present: np.ndarray, half_window: int = Z_W
     padded = np.pad(np.where(present, values, np.nan), ((0, 0), (half_window, half_window)),
                     constant_values=np.nan)
     windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half_window + 1, axis=1)  # (N, T, W)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # a window with nothing present
-        return np.nanmedian(windows, axis=-1)
+    return _nanmedian_last(windows)
+
+
+def _nanmedian_last(values: np.ndarray) -> np.ndarray:
+    """np.nanmedian over the last axis, the same bits, without its masked-array path (slow on many small
+    windows): sort (NaN last), then the mean of the two middle present values. (..., W) -> (...)"""
+    ordered = np.sort(values, axis=-1)  # (..., W)
+    count = (~np.isnan(values)).sum(axis=-1)  # (...,) present values
+    high = count // 2
+    low = np.where(count % 2 == 1, high, high - 1)  # odd: the middle value twice, so the mean is itself
+    pick = np.stack([np.maximum(low, 0), high], axis=-1)  # (..., 2)
+    middle = np.take_along_axis(ordered, np.minimum(pick, values.shape[-1] - 1), axis=-1)  # (..., 2)
+    with np.errstate(invalid="ignore", over="ignore"):
+        median = (middle[..., 0] + middle[..., 1]) / 2.0
+    return np.where(count > 0, median, np.nan)
 
 
 def z_outliers(z: np.ndarray, present: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -106,3 +106,18 @@ def test_lane_arcs_and_tangents_match_the_per_lane_helpers():
         np.testing.assert_array_equal(lanes.cumulative[k], np.concatenate([[0.0], np.cumsum(steps)]))
         np.testing.assert_array_equal(arc_lengths(line), lanes.cumulative[k])
     np.testing.assert_array_equal(lanes.point_tangent, np.vstack([tangents(lanes.polyline(k)) for k in range(6)]))
+
+
+def test_nanmedian_of_the_sanity_checks_matches_numpy():
+    import warnings
+
+    from scenariomax.sources.sanity import _nanmedian_last
+
+    rng = np.random.default_rng(3)
+    values = np.round(rng.normal(size=(30, 40, 7)) * 3, 1)  # ties included
+    values[rng.random(values.shape) < 0.4] = np.nan
+    values[0, 0] = np.nan  # a window with nothing present
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        want = np.nanmedian(values, axis=-1)
+    np.testing.assert_array_equal(_nanmedian_last(values), want)
