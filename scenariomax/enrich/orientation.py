@@ -30,7 +30,7 @@ import shapely
 from scipy.spatial import cKDTree
 
 from scenariomax import schema as sch
-from scenariomax.enrich.geometry import polyline_runs
+from scenariomax.enrich.geometry import polyline_runs, run_cumsum, run_interp, run_starts
 from scenariomax.enrich.lanes import Lanes
 from scenariomax.enrich.roadgraph import MapPolyline
 from scenariomax.scenario import Scenario
@@ -162,6 +162,40 @@ def _densify(xy: np.ndarray, spacing: float) -> np.ndarray:
     return np.stack([np.interp(arcs, cum, xy[:, 0]), np.interp(arcs, cum, xy[:, 1])], axis=1)
 
 
+def densify_all(polylines: Sequence[np.ndarray], spacing: float) -> np.ndarray:
+    """`_densify` of every polyline (n_i, 2), stacked: the same points, all polylines in one pass. -> (m, 2)"""
+    counts = np.array([len(xy) for xy in polylines], np.int64)  # (P,)
+    if counts.sum() == 0:
+        return np.zeros((0, 2))
+    xy = np.concatenate(polylines)  # (n, 2)
+    starts = run_starts(counts)
+    step = np.zeros(len(xy))
+    step[1:] = np.sqrt(np.sum(np.diff(xy, axis=0) ** 2, axis=1))  # norm(diff) per row
+    step[starts[counts > 0]] = 0.0
+    cum = run_cumsum(step, counts)  # (n,) arc length at each vertex of its polyline
+    total = cum[np.maximum(starts + counts - 1, 0)]  # (P,)
+    dense = (counts >= 2) & (total > spacing)  # the others are kept as they are
+    # Targets of each densified polyline: the union of its vertex arcs and a grid every `spacing` (np.arange).
+    grid_count = np.where(dense, np.ceil(total / spacing), 0).astype(np.int64)  # (P,)
+    grid_run = np.repeat(np.arange(len(counts)), grid_count)
+    grid = (np.arange(grid_count.sum()) - np.repeat(run_starts(grid_count), grid_count)) * spacing
+    vertex_run = np.repeat(np.arange(len(counts)), counts)
+    on_dense = dense[vertex_run]
+    run = np.concatenate([grid_run, vertex_run[on_dense]])
+    arcs = np.concatenate([grid, cum[on_dense]])
+    order = np.lexsort((arcs, run))
+    run, arcs = run[order], arcs[order]
+    fresh = np.ones(len(arcs), bool)
+    fresh[1:] = (run[1:] != run[:-1]) | (arcs[1:] != arcs[:-1])  # np.union1d drops equal values
+    run, arcs = run[fresh], arcs[fresh]
+    dense_rank = np.cumsum(dense) - 1  # index of each densified polyline among them
+    points = run_interp(arcs, dense_rank[run], cum[on_dense], xy[on_dense], counts[dense])  # (k, 2)
+    # Back in polyline order: densified points, or the raw points of the polylines left as they are.
+    out_run = np.concatenate([run, vertex_run[~on_dense]])
+    out = np.concatenate([points, xy[~on_dense]])
+    return out[np.argsort(out_run, kind="stable")]
+
+
 def orient_road_edges(polylines: Sequence[MapPolyline], edge_types: Sequence[int] = sch.ROAD_EDGE_TYPES,
                       lane_types: Sequence[int] = sch.LANE_TYPES,
                       search_radius_m: float = EDGE_SEARCH_RADIUS_M) -> list[MapPolyline]:
@@ -171,7 +205,7 @@ def orient_road_edges(polylines: Sequence[MapPolyline], edge_types: Sequence[int
     if not edge_rows or not lanes:
         return list(polylines)
     origin = np.asarray(polylines[edge_rows[0]].xyz, np.float64)[0, :2]  # local coordinates keep float64 exact
-    lane_xy = np.vstack([_densify(xy - origin, LANE_SPACING_M) for xy in lanes])
+    lane_xy = densify_all([xy - origin for xy in lanes], LANE_SPACING_M)
     votes = edge_votes([np.asarray(polylines[k].xyz, np.float64)[:, :2] - origin for k in edge_rows], lane_xy,
                        [polylines[k].closed for k in edge_rows], search_radius_m)
     out = list(polylines)

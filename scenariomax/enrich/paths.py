@@ -173,6 +173,8 @@ def _logged_change(on_lanes: _TrackNearLanes, lane_a: int, cum_a: np.ndarray, la
     if len(on_lanes.track) < 3:
         return None
     dist_a, arc_a = on_lanes.of(lane_a)
+    if np.count_nonzero(dist_a < settings.max_change_offset_m) < 2:
+        return None  # the log never runs beside A: no need to look at B
     dist_b, _ = on_lanes.of(lane_b)
     between = ((dist_a < settings.max_change_offset_m) & (dist_b < settings.max_change_offset_m)
                & (arc_a >= arc_from - 1.0) & (arc_a < cum_a[-1] - 1e-3))

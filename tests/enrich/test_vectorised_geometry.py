@@ -121,3 +121,13 @@ def test_nanmedian_of_the_sanity_checks_matches_numpy():
         warnings.simplefilter("ignore", RuntimeWarning)
         want = np.nanmedian(values, axis=-1)
     np.testing.assert_array_equal(_nanmedian_last(values), want)
+
+
+def test_densify_all_matches_densify_per_polyline():
+    from scenariomax.enrich.orientation import _densify, densify_all
+
+    rng = np.random.default_rng(4)
+    lines = [np.cumsum(rng.normal(size=(n, 2)), 0) * scale for n, scale in ((0, 1), (1, 1), (2, 0.1), (9, 3), (30, 1))]
+    lines[3][4] = lines[3][3]  # a repeated vertex
+    for spacing in (1.0, 0.7):
+        np.testing.assert_array_equal(densify_all(lines, spacing), np.vstack([_densify(xy, spacing) for xy in lines]))
