@@ -15,9 +15,10 @@ The one rule, used by the sources whose raw maps do not fix an orientation (WOMD
 - an edge whose total vote is negative (the visible lanes lie mostly on its right) is reversed; an edge
   with no visible lane nearby keeps its raw order.
 
-The crossing test is vectorised: a shapely STRtree over the edge segments gives the candidate pairs
-(bounding boxes overlap), then exact segment intersection in numpy. Directions must be re-derived
-after reversing (`with_recomputed_directions`; `polylines_to_roadgraph` does it for sources).
+The crossing test is vectorised: a uniform grid over the segments' bounding boxes gives the candidate pairs
+(bounding boxes overlap: the pairs a shapely STRtree query gives, without building geometries), then exact
+segment intersection in numpy. Directions must be re-derived after reversing (`with_recomputed_directions`;
+`polylines_to_roadgraph` does it for sources).
 """
 
 from __future__ import annotations
@@ -26,7 +27,6 @@ import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
-import shapely
 from scipy.spatial import cKDTree
 
 from scenariomax import schema as sch
@@ -92,14 +92,57 @@ def _vote_samples(start: np.ndarray, end: np.ndarray, owner: np.ndarray, num_edg
     return point, tangent, sample_edge, weight
 
 
+def _num_cells(low: np.ndarray, high: np.ndarray, cell: float) -> int:
+    span = np.floor(high / cell) - np.floor(low / cell) + 1  # (k, 2)
+    return int((span[:, 0] * span[:, 1]).sum())
+
+
+def _cells(low: np.ndarray, high: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """The grid cells each box (lower (k, 2), upper (k, 2) corner) touches: (box, cell key) pairs. -> (c,), (c,)"""
+    first = np.floor(low / cell).astype(np.int64)  # (k, 2)
+    last = np.floor(high / cell).astype(np.int64)
+    span = last - first + 1  # (k, 2) cells along x and y
+    count = span[:, 0] * span[:, 1]  # (k,)
+    box = np.repeat(np.arange(len(low)), count)  # (c,)
+    rank = np.arange(len(box)) - np.repeat(np.cumsum(count) - count, count)  # (c,) cell number within its box
+    ix = first[box, 0] + rank // span[box, 1]
+    iy = first[box, 1] + rank % span[box, 1]
+    return box, ix * (1 << 32) + iy
+
+
+def box_pairs(a_low: np.ndarray, a_high: np.ndarray, b_low: np.ndarray, b_high: np.ndarray,
+              cell: float = 8.0) -> tuple[np.ndarray, np.ndarray]:
+    """Every (a, b) pair of boxes that overlap (touching counts: the envelope test of shapely's STRtree, which
+    this replaces; the set of pairs is the same). Boxes as lower / upper corners (k, 2). -> (p,), (p,) indices.
+
+    Candidates come from a uniform grid (boxes sharing a cell), then the exact overlap test keeps the pairs."""
+    if len(a_low) == 0 or len(b_low) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    # A few very long boxes (a straight edge of a kilometre) would touch too many cells: coarser grid then.
+    while _num_cells(a_low, a_high, cell) + _num_cells(b_low, b_high, cell) > 20 * (len(a_low) + len(b_low)) + 10_000:
+        cell *= 2.0
+    a_box, a_key = _cells(a_low, a_high, cell)
+    b_box, b_key = _cells(b_low, b_high, cell)
+    order = np.argsort(b_key, kind="stable")
+    b_box, b_key = b_box[order], b_key[order]
+    begin, stop = np.searchsorted(b_key, a_key, "left"), np.searchsorted(b_key, a_key, "right")
+    count = stop - begin  # (ca,) b entries in the same cell
+    a_of = np.repeat(a_box, count)
+    b_of = b_box[np.repeat(begin, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)]
+    pair = np.unique(a_of * len(b_low) + b_of)  # boxes sharing several cells: once
+    a_of, b_of = pair // len(b_low), pair % len(b_low)
+    overlap = np.all((a_low[a_of] <= b_high[b_of]) & (b_low[b_of] <= a_high[a_of]), axis=1)
+    return a_of[overlap], b_of[overlap]
+
+
 def _sight_blocked(origin: np.ndarray, target: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
     """Whether each sight segment origin -> target (M, 2) crosses one of the segments start -> end (S, 2)
     further than _SIGHT_EPS_M from its origin. -> (M,) bool"""
     blocked = np.zeros(len(origin), bool)
     if len(origin) == 0 or len(start) == 0:
         return blocked
-    tree = shapely.STRtree(shapely.linestrings(np.stack([start, end], axis=1)))
-    sight, seg = tree.query(shapely.linestrings(np.stack([origin, target], axis=1)))  # bounding boxes overlap
+    sight, seg = box_pairs(np.minimum(origin, target), np.maximum(origin, target),
+                           np.minimum(start, end), np.maximum(start, end))  # bounding boxes overlap
     if len(sight) == 0:
         return blocked
     p, d = origin[sight], target[sight] - origin[sight]

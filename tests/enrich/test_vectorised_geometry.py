@@ -131,3 +131,20 @@ def test_densify_all_matches_densify_per_polyline():
     lines[3][4] = lines[3][3]  # a repeated vertex
     for spacing in (1.0, 0.7):
         np.testing.assert_array_equal(densify_all(lines, spacing), np.vstack([_densify(xy, spacing) for xy in lines]))
+
+
+def test_box_pairs_are_the_pairs_of_a_shapely_strtree():
+    import shapely
+
+    from scenariomax.enrich.orientation import box_pairs
+
+    rng = np.random.default_rng(5)
+    for scale in (3.0, 40.0, 2000.0):  # short segments, long ones, a few kilometre-long ones (coarser grid)
+        a0, b0 = rng.uniform(-500, 500, (300, 2)), rng.uniform(-500, 500, (400, 2))
+        a1, b1 = a0 + rng.normal(size=(300, 2)) * scale, b0 + rng.normal(size=(400, 2)) * scale
+        a1[:20] = a0[:20]  # points
+        b0[:10, 0], b1[:10, 0] = a1[:10, 0], a1[:10, 0] + 5.0  # boxes that only touch
+        tree = shapely.STRtree(shapely.linestrings(np.stack([b0, b1], axis=1)))
+        want = tree.query(shapely.linestrings(np.stack([a0, a1], axis=1)))
+        got = box_pairs(np.minimum(a0, a1), np.maximum(a0, a1), np.minimum(b0, b1), np.maximum(b0, b1))
+        assert set(zip(*got)) == set(zip(*want))
