@@ -111,7 +111,7 @@ def _cells(low: np.ndarray, high: np.ndarray, cell: float) -> tuple[np.ndarray, 
 
 
 def box_pairs(a_low: np.ndarray, a_high: np.ndarray, b_low: np.ndarray, b_high: np.ndarray,
-              cell: float = 8.0) -> tuple[np.ndarray, np.ndarray]:
+              cell: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
     """Every (a, b) pair of boxes that overlap (touching counts: the envelope test of shapely's STRtree, which
     this replaces; the set of pairs is the same). Boxes as lower / upper corners (k, 2). -> (p,), (p,) indices.
 
@@ -127,12 +127,14 @@ def box_pairs(a_low: np.ndarray, a_high: np.ndarray, b_low: np.ndarray, b_high: 
     b_box, b_key = b_box[order], b_key[order]
     begin, stop = np.searchsorted(b_key, a_key, "left"), np.searchsorted(b_key, a_key, "right")
     count = stop - begin  # (ca,) b entries in the same cell
-    a_of = np.repeat(a_box, count)
+    a_of = np.repeat(a_box, count)  # (p,) candidate pairs, one per shared cell
+    key = np.repeat(a_key, count)
     b_of = b_box[np.repeat(begin, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)]
-    pair = np.unique(a_of * len(b_low) + b_of)  # boxes sharing several cells: once
-    a_of, b_of = pair // len(b_low), pair % len(b_low)
     overlap = np.all((a_low[a_of] <= b_high[b_of]) & (b_low[b_of] <= a_high[a_of]), axis=1)
-    return a_of[overlap], b_of[overlap]
+    # Boxes sharing several cells: the pair is kept in one, the cell of the overlap's lower corner.
+    corner = np.floor(np.maximum(a_low[a_of], b_low[b_of]) / cell).astype(np.int64)  # (p, 2)
+    once = corner[:, 0] * (1 << 32) + corner[:, 1] == key
+    return a_of[overlap & once], b_of[overlap & once]
 
 
 def _sight_blocked(origin: np.ndarray, target: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
