@@ -101,6 +101,7 @@ def _stop_node(node: subprocess.Popen, grace_s: float = 5.0) -> None:
 @pytest.fixture
 def two_node_cluster() -> Iterator[tuple[str, dict, Path]]:
     """(GCS address, environment for Ray processes and drivers, folder holding both nodes' temp dirs)."""
+    pytest.importorskip("ray", reason="the ray extra is not installed")
     ray_bin = Path(sys.executable).with_name("ray")
     if not ray_bin.exists():
         pytest.skip("the `ray` command of the ray extra is not next to this Python")
@@ -167,7 +168,6 @@ def _jobs_per_node(root: Path) -> dict[str, set[str]]:
 @pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_killed_and_resumed_on_two_nodes_matches_the_process_engine(two_node_cluster, tmp_path):
-    pytest.importorskip("ray", reason="the ray extra is not installed")
     address, env, root = two_node_cluster
     reference, crashed = tmp_path / "process", tmp_path / "ray"
     done = _cli([*CONVERT, "--workers", "2", "--out", str(reference)], env)
