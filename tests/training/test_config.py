@@ -38,11 +38,25 @@ def test_overrides_are_typed():
     ("train.total_env_steps=2.5", "expected an integer"),
     ("algo.learn_alpha=maybe", "expected true or false"),
     ("train.pool_refresh=1000", "pool_refresh"),
+    ("train.traffic=replay", "train.traffic must be one of log, idm"),
+    ("train.traffic_agents=0", "train.traffic_agents must be at least 1"),
 ])
 def test_bad_overrides_fail_in_one_line(override, message):
     with pytest.raises(ValueError, match=message) as error:
         apply_overrides(preset_config("sac"), [override])
     assert "\n" not in str(error.value)
+
+
+def test_idm_traffic_is_a_training_option_that_self_play_refuses():
+    from vmax_sim.training.run import components, train_data_config
+
+    config = apply_overrides(preset_config("bc-mlp"), ["train.traffic=idm", "train.traffic_agents=4"])
+    env, _ = components(config)
+    assert (env.traffic, env.traffic_agents) == ("idm", 4)
+    assert train_data_config(config, "shards", 0).include_agent_paths  # the agents' own routes are loaded
+    assert not train_data_config(preset_config("bc-mlp"), "shards", 0).include_agent_paths
+    with pytest.raises(ValueError, match="choose one"):
+        apply_overrides(preset_config("ppo-selfplay"), ["train.traffic=idm"])
 
 
 def test_switching_algorithm_resets_its_config():

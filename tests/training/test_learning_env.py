@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import chex
@@ -10,7 +11,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from tests.integration_sim.conftest import braking_scenario, cruising_scenario, small_data_config
+from tests.integration_sim.conftest import (
+    DT,
+    NUM_STEPS,
+    braking_scenario,
+    cruising_scenario,
+    road_scenario,
+    small_data_config,
+)
 from vmax_sim.data import scenarios_to_batch
 from vmax_sim.env import EnvConfig
 from vmax_sim.env.learning import LearningEnv
@@ -111,3 +119,55 @@ def test_step_compiles_once():
 
     for _ in range(3):
         state, _ = step(state, jnp.zeros((2, 2)))
+
+
+def follower_scenario():
+    """The SDC at x = 30 m and a controllable follower at x = 0, both logged at a steady 10 m/s on one lane (the
+    follower has its own path). An SDC that brakes is rear-ended by the follower's log."""
+    time = np.arange(NUM_STEPS) * DT
+    xs = np.stack([30.0 + 10.0 * time, 10.0 * time])
+    path_x = np.arange(-20.0, 250.0)
+    return dataclasses.replace(
+        road_scenario("follower", xs, np.full_like(xs, 10.0)), is_controllable=np.array([True, True]),
+        agent_path_object_index=np.array([1]), agent_path_valid=np.ones((1, len(path_x)), bool),
+        agent_path_xyz=np.stack([path_x, 0 * path_x, 0 * path_x], 1)[None].astype(np.float32),
+        agent_path_arc_length=(path_x - path_x[0])[None].astype(np.float32))
+
+
+@pytest.mark.slow  # ~100 s on 2 cores (two env compilations): the default suite stays under 10 minutes
+@pytest.mark.parametrize("traffic", ["log", "idm"])
+def test_idm_traffic_brakes_for_a_braking_learner_that_log_traffic_rear_ends(traffic):
+    env = LearningEnv(EnvConfig(max_num_objects=8), traffic=traffic)
+    pool = scenarios_to_batch([follower_scenario()], small_data_config("", include_agent_paths=True))
+
+    def brake_to_a_stop(state):  # straight on, braking at up to 6 m/s^2 until it stands (the model would reverse)
+        now = jax.tree.map(lambda a: a[:, 0, state.sim.timestep[0]], state.sim.sim_trajectory)  # the SDC, (B,)
+        speed = jnp.hypot(now.vel_x, now.vel_y)
+        accel = -jnp.clip(speed / DT, 0.0, 6.0)
+        return env.core.dynamics.normalize(jnp.stack([accel, jnp.zeros_like(accel)], -1))
+
+    @jax.jit
+    def episode(pool):
+        state = env.reset(pool, 1, jax.random.PRNGKey(0))
+
+        def body(state, _):
+            state, out = env.step(state, brake_to_a_stop(state), pool)
+            return state, (out, state.sim.sim_trajectory.x[0, :2, state.sim.timestep[0]])
+        return jax.lax.scan(body, state, None, length=45)[1]
+
+    out, xs = episode(pool)  # xs (T, 2): the SDC's and the follower's x
+    first_done = int(np.argmax(np.asarray(out.done[:, 0])))
+    if traffic == "log":  # the logged follower keeps 10 m/s into the stopped SDC
+        assert bool(out.terminated[first_done, 0]) and bool(out.episode_flags["overlap"][first_done, 0])
+    else:  # IDM slows the follower down behind it; the SDC stands still until the time limit
+        assert not bool(jnp.any(out.terminated[:, 0]))
+        assert not bool(jnp.any(out.episode_flags["overlap"]))
+        sdc_x, follower_x = np.asarray(xs).T
+        assert follower_x[-1] + 2.25 < sdc_x[-1] - 2.25 - 1.0  # its front bumper > 1 m behind the SDC's rear one
+        assert np.diff(follower_x)[-1] < 0.5 * np.diff(follower_x)[0]  # at well under half its speed
+
+
+def test_idm_traffic_needs_the_agents_paths():
+    env = LearningEnv(EnvConfig(max_num_objects=8), traffic="idm")
+    with pytest.raises(ValueError, match="IDM traffic .* needs the agents' paths"):
+        env.reset(pool(), 1, jax.random.PRNGKey(0))

@@ -15,9 +15,9 @@ from vmax_sim.datatypes import RoadgraphPoints, SimulatorState
 from vmax_sim.env.metrics_adapter import sdc_index
 
 
-def check_agent_paths(state: SimulatorState) -> None:
+def check_agent_paths(state: SimulatorState, needed_by: str = "reactive evaluation") -> None:
     if state.agent_paths is None:
-        raise ValueError("reactive evaluation needs the agents' paths: load the data with "
+        raise ValueError(f"{needed_by} needs the agents' paths: load the data with "
                          "DataConfig(include_agent_paths=True)")
 
 

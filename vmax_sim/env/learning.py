@@ -1,7 +1,10 @@
 """`LearningEnv`: the one place a training loop gets reset / step / observe / reward, over a batch.
 
-The SDC is driven by the policy (actions in [-1, 1], mapped onto the dynamics' bounds), every other
-object replays the log. Each step computes the metrics once and derives from them the reward, the
+The SDC is driven by the policy (actions in [-1, 1], mapped onto the dynamics' bounds). Every other
+object replays the log, or (traffic="idm") up to `traffic_agents` controllable agents nearest the SDC
+follow their own paths with IDM, never ahead of their logged position, so traffic reacts to a learner
+that drives differently from the logged SDC (a log-replayed follower drives into a learner that brakes).
+Each step computes the metrics once and derives from them the reward, the
 termination (collision / off-road / red light, as `EnvConfig.terminate_on`), the truncation (episode
 length or end of the log) and the next observation, which reuses the metrics' candidate objects and
 path projection. Finished episodes restart on the next scenario of a device-side pool (auto-reset);
@@ -20,7 +23,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from vmax_sim.datatypes import SimulatorState, sdc_action
+from vmax_sim.datatypes import RoadgraphPoints, SimulatorState, sdc_action
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.environment import Environment
 from vmax_sim.env.metrics_adapter import reference_arcs, sdc_index, sdc_observation, step_inputs
@@ -33,6 +36,16 @@ from vmax_sim.rewards import RewardConfig, check_reward_config, compute_reward
 TERMINATION_METRICS = {"collision": "overlap", "offroad": "offroad", "red_light": "red_light"}
 # Per-episode indicators reported when an episode ends (any step of the episode).
 EPISODE_FLAGS = ("overlap", "offroad", "red_light", "off_route", "wrong_way", "at_fault_collision")
+TRAFFIC_CHOICES = ("log", "idm")  # who drives the objects other than the SDC while training
+
+
+@struct.dataclass
+class TrafficAgents:
+    """The agents IDM drives in one episode (traffic="idm"), chosen when it starts."""
+
+    slots: jax.Array  # (K,) int32, object slots, nearest the SDC first
+    valid: jax.Array  # (K,) bool, a slot holds a driven agent
+    signs: RoadgraphPoints  # (S,) the roadgraph's stop-sign points the agents see (`stop_sign_points`)
 
 
 @struct.dataclass
@@ -47,6 +60,7 @@ class LearningState:
     episode_flags: dict  # name -> (B,) bool, EPISODE_FLAGS seen so far in the episode
     next_scenario: jax.Array  # () int32, pool index of the next episode to start
     key: jax.Array  # PRNG key for observation noise
+    traffic: TrafficAgents | None = None  # (B, ...) the IDM-driven agents (traffic="idm"), else None
 
 
 @struct.dataclass
@@ -85,14 +99,23 @@ class LearningEnv:
     # within them stops there): at 10 Hz one action barely changes the future, so a critic learns little
     # about it (docs/learning.md)
     action_repeat: int = 1
+    # who drives the other objects: "log" (they replay it) or "idm" (see the module docstring)
+    traffic: str = "log"
+    traffic_agents: int = 8  # traffic="idm": at most this many agents are driven, the rest replay the log
 
     def __post_init__(self) -> None:
         if self.env_config.controlled != "sdc":
             raise ValueError("LearningEnv drives the SDC only: EnvConfig.controlled must be 'sdc'")
         check_learning_settings(self.env_config, self.reward_config, self.action_repeat)
+        check_traffic(self.traffic, self.traffic_agents)
         config = dataclasses.replace(self.env_config, normalize_actions=True)  # policies act in [-1, 1]
         object.__setattr__(self, "env_config", config)
         object.__setattr__(self, "core", Environment(config))
+        if self.traffic == "idm":
+            from vmax_sim.policies.traffic import idm_driver  # the planners import the env: imported late
+
+            # the reactive evaluation's IDM agents: their logged pace, never ahead of their logged position
+            object.__setattr__(self, "_agent_fn", idm_driver(self.core, speed="log", follow_log=True))
 
     @property
     def action_dim(self) -> int:
@@ -107,11 +130,38 @@ class LearningEnv:
         return shared, step_metrics(sim.map_index, inputs, self.metrics_config, shared)
 
     def _start(self, sim: SimulatorState):
-        """Reset one scene: state, arcs, shared queries, metrics, observation."""
+        """Reset one scene: state, arcs, shared queries, metrics, observation, IDM-driven agents (or None)."""
         sim = self.core.reset(sim)
+        sim, traffic = self._choose_traffic(sim)
         arcs = reference_arcs(sim, self.env_config)
         shared, metrics = self._measure(sim, arcs)
-        return sim, arcs, shared, metrics, sdc_observation(sim, shared, self.obs_config)
+        return sim, arcs, shared, metrics, sdc_observation(sim, shared, self.obs_config), traffic
+
+    def _choose_traffic(self, sim: SimulatorState) -> tuple[SimulatorState, TrafficAgents | None]:
+        """traffic="idm": the agents to drive this episode, marked controlled (the dynamics move them)."""
+        if self.traffic != "idm":
+            return sim, None
+        from vmax_sim.env.agent_view import choose_agents
+        from vmax_sim.policies.traffic import stop_sign_points
+
+        slots, valid = choose_agents(sim, self.traffic_agents, self.env_config.first_policy_timestep)
+        driven = jnp.zeros(sim.num_objects, bool).at[jnp.where(valid, slots, sim.num_objects)].set(True, mode="drop")
+        meta = sim.object_metadata
+        sim = sim.replace(object_metadata=meta.replace(is_controlled=meta.is_sdc | driven,
+                                                       max_controlled=1 + slots.shape[0]))
+        return sim, TrafficAgents(slots=slots, valid=valid, signs=stop_sign_points(sim))
+
+    def _full_action(self, sim: SimulatorState, action: jax.Array, traffic: TrafficAgents | None, key: jax.Array):
+        """The SDC's action (A,) in its slot, with the IDM agents' actions in theirs. -> Action (N, A)"""
+        full = sdc_action(sim, action)
+        if traffic is None:
+            return full
+        from vmax_sim.env.multi_agent import sdc_and_agents_action
+        from vmax_sim.policies.traffic import agents_action
+
+        others = agents_action(sim, traffic.slots, traffic.valid, self._agent_fn, None, key, self.action_dim,
+                               traffic.signs)
+        return sdc_and_agents_action(sim, full, others)
 
     def _expert(self, sim: SimulatorState) -> jax.Array:
         """The SDC's log-following action in [-1, 1] (inverse dynamics of the SDC's row only). (A,)"""
@@ -122,10 +172,11 @@ class LearningEnv:
         action = dynamics.expert_step(row(sim.current_sim_trajectory), row(sim.next_log_trajectory))[0]
         return jnp.clip(dynamics.normalize(action), -1.0, 1.0)
 
-    def _move(self, sim: SimulatorState, arcs: jax.Array, action: jax.Array):
-        """One simulator step of one scene with the SDC's action (A,): state, queries, metrics, termination,
-        truncation."""
-        sim = self.core.step(sim, sdc_action(sim, action))
+    def _move(self, sim: SimulatorState, arcs: jax.Array, action: jax.Array, traffic: TrafficAgents | None,
+              key: jax.Array):
+        """One simulator step of one scene with the SDC's action (A,) (and the IDM agents'): state, queries,
+        metrics, termination, truncation."""
+        sim = self.core.step(sim, self._full_action(sim, action, traffic, key))
         shared, metrics = self._measure(sim, arcs)
         terminated = jnp.zeros((), bool)
         for name in self.env_config.terminate_on:
@@ -137,24 +188,26 @@ class LearningEnv:
         noise_key = key if _has_noise(self.obs_config) else None
         return sdc_observation(sim, shared, self.obs_config, noise_key)
 
-    def _advance(self, sim: SimulatorState, arcs: jax.Array, metrics: dict, action: jax.Array, key: jax.Array):
+    def _advance(self, sim: SimulatorState, arcs: jax.Array, metrics: dict, action: jax.Array,
+                 traffic: TrafficAgents | None, key: jax.Array):
         """One policy step of one scene: the action held for `action_repeat` simulator steps, or until the
         episode ends -> (state, queries, metrics, reward summed, terminated, truncated, flags seen, observation).
         `metrics` are the current step's (the progress term compares with them)."""
-        sim, shared, new_metrics, terminated, truncated = self._move(sim, arcs, action)
+        sim, shared, new_metrics, terminated, truncated = self._move(sim, arcs, action, traffic, key)
         reward = compute_reward(new_metrics, metrics, self.reward_config, self.metrics_config)
         flags = {name: new_metrics[name] > 0.5 for name in EPISODE_FLAGS}
         parts = (sim, shared, new_metrics, reward, terminated, truncated, flags)
         for _ in range(self.action_repeat - 1):  # unrolled: repeats are few
-            parts = self._repeat_once(parts, arcs, action)
+            parts = self._repeat_once(parts, arcs, action, traffic, key)
         sim, shared, metrics, reward, terminated, truncated, flags = parts
         return sim, shared, metrics, reward, terminated, truncated, flags, self._observe(sim, shared, key)
 
-    def _repeat_once(self, parts, arcs: jax.Array, action: jax.Array):
+    def _repeat_once(self, parts, arcs: jax.Array, action: jax.Array, traffic: TrafficAgents | None,
+                     key: jax.Array):
         """One simulator step of a held action; a scene whose episode already ended keeps its state."""
         sim, shared, metrics, reward, terminated, truncated, flags = parts
         running = ~(terminated | truncated)
-        moved = self._move(sim, arcs, action)
+        moved = self._move(sim, arcs, action, traffic, key)
         new_sim, new_shared, new_metrics, new_terminated, new_truncated = moved
         keep = lambda new, old: jax.tree.map(lambda n, o: jnp.where(running, n, o), new, old)  # noqa: E731
         reward = reward + jnp.where(running, compute_reward(new_metrics, metrics, self.reward_config,
@@ -171,15 +224,19 @@ class LearningEnv:
 
     def reset(self, pool: SimulatorState, batch_size: int, key: jax.Array) -> LearningState:
         """Starts `batch_size` episodes on pool scenarios 0..B-1 (cycled when the pool is smaller)."""
+        if self.traffic == "idm":
+            from vmax_sim.env.agent_view import check_agent_paths
+
+            check_agent_paths(pool, "IDM traffic (traffic='idm')")
         pool_size = pool.timestep.shape[0]
         indices = jnp.arange(batch_size) % pool_size
-        sim, arcs, shared, metrics, observation = jax.vmap(self._start)(_take(pool, indices))
+        sim, arcs, shared, metrics, observation, traffic = jax.vmap(self._start)(_take(pool, indices))
         zeros = jnp.zeros(batch_size)
         return LearningState(
             sim=sim, arcs=arcs, shared=shared, metrics=metrics, observation=observation,
             episode_return=zeros, episode_length=jnp.zeros(batch_size, jnp.int32),
             episode_flags={name: jnp.zeros(batch_size, bool) for name in EPISODE_FLAGS},
-            next_scenario=jnp.asarray(batch_size % pool_size, jnp.int32), key=key)
+            next_scenario=jnp.asarray(batch_size % pool_size, jnp.int32), key=key, traffic=traffic)
 
     def expert_action(self, state: LearningState) -> jax.Array:
         """The log-following SDC action of every running episode. (B, A) in [-1, 1]"""
@@ -192,7 +249,7 @@ class LearningEnv:
         expert = self.expert_action(state) if self.expert_labels else jnp.zeros_like(action)
         key, step_key = jax.random.split(state.key)
         sim, shared, metrics, reward, terminated, truncated, seen, next_obs = jax.vmap(self._advance)(
-            state.sim, state.arcs, state.metrics, action, jax.random.split(step_key, batch_size))
+            state.sim, state.arcs, state.metrics, action, state.traffic, jax.random.split(step_key, batch_size))
         done = terminated | truncated
         episode_return = state.episode_return + reward
         episode_length = state.episode_length + 1
@@ -210,7 +267,7 @@ class LearningEnv:
             episode_return=jnp.where(done, 0.0, episode_return),
             episode_length=jnp.where(done, 0, episode_length),
             episode_flags={name: flag & ~done for name, flag in flags.items()},
-            next_scenario=state.next_scenario, key=key)
+            next_scenario=state.next_scenario, key=key, traffic=state.traffic)
         new_state = self._restart_finished(running, done, pool)
         return new_state, output
 
@@ -228,10 +285,11 @@ class LearningEnv:
             return jax.tree.map(lambda c, f: jax.lax.dynamic_update_index_in_dim(c, f.astype(c.dtype), rows[k], 0),
                                 parts, fresh)
 
-        kept = (state.sim, state.arcs, state.shared, state.metrics, state.observation)
-        sim, arcs, shared, metrics, observation = jax.lax.cond(
+        kept = (state.sim, state.arcs, state.shared, state.metrics, state.observation, state.traffic)
+        sim, arcs, shared, metrics, observation, traffic = jax.lax.cond(
             num_done > 0, lambda parts: jax.lax.fori_loop(0, num_done, restart_one, parts), lambda parts: parts, kept)
         return state.replace(sim=sim, arcs=arcs, shared=shared, metrics=metrics, observation=observation,
+                             traffic=traffic,
                              next_scenario=((state.next_scenario + num_done) % pool_size).astype(jnp.int32))
 
 
@@ -244,6 +302,14 @@ def check_learning_settings(env_config: EnvConfig, reward_config: RewardConfig, 
     check_reward_config(reward_config)
     if action_repeat < 1:
         raise ValueError(f"action_repeat must be at least 1, got {action_repeat}")
+
+
+def check_traffic(traffic: str, traffic_agents: int, prefix: str = "") -> None:
+    """One-line ValueError for a traffic setting a learning env cannot use (prefix: the settings' section)."""
+    if traffic not in TRAFFIC_CHOICES:
+        raise ValueError(f"{prefix}traffic must be one of {', '.join(TRAFFIC_CHOICES)}, got {traffic!r}")
+    if traffic_agents < 1:
+        raise ValueError(f"{prefix}traffic_agents must be at least 1, got {traffic_agents}")
 
 
 def _has_noise(config: ObservationConfig) -> bool:

@@ -17,10 +17,11 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+from vmax_sim.policies.traffic import AGENT_SPEEDS
+
 MODE_NAMES = ("non_reactive", "reactive", "perturbed", "adversarial")
 PLANNED_MODES: tuple[str, ...] = ()
 AGENT_DRIVERS = ("idm", "pdm", "same", "learned")
-AGENT_SPEEDS = ("limit", "log")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -20,6 +20,7 @@ from typing import Any
 from scenariomax import SyntheticKnobs
 from vmax_sim.agents import ALGORITHMS, get_config
 from vmax_sim.env.config import EnvConfig
+from vmax_sim.env.learning import check_traffic
 from vmax_sim.env.selfplay import SelfPlayConfig
 from vmax_sim.networks import ENCODER_NAMES, EncoderConfig
 from vmax_sim.observation import NoiseConfig, ObservationConfig
@@ -67,6 +68,11 @@ class LoopConfig:
     # env steps count policy actions. Evaluation acts every simulator step. None: ACTION_REPEAT of the
     # algorithm with its "default" settings (sac, ppo: 4, with gamma 0.96 per action), else 1
     action_repeat: int | None = None
+    # who drives the objects other than the SDC while training: "log" (they replay it) or "idm" (up to
+    # traffic_agents controllable agents nearest the SDC follow their own paths with IDM, never ahead of their
+    # logged position: a follower brakes for a learner that brakes). Evaluation stays non-reactive.
+    traffic: str = "log"
+    traffic_agents: int = 8
     seed: int = 0
     # wall-clock budget of the training loop (minutes; setup and compilation excluded, evaluations during training
     # included): the run stops at the first chunk past it with a final checkpoint and a final evaluation
@@ -81,6 +87,7 @@ class LoopConfig:
                 raise ValueError(f"train.{name} must be at least 1, got {getattr(self, name)}")
         if self.pool_refresh is not None and (self.pool_refresh < 0 or self.pool_refresh > self.pool_size):
             raise ValueError(f"train.pool_refresh must be in [0, pool_size={self.pool_size}], got {self.pool_refresh}")
+        check_traffic(self.traffic, self.traffic_agents, prefix="train.")
         if self.buffer_dtype not in ("float16", "bfloat16", "float32"):
             raise ValueError(f"train.buffer_dtype must be float16, bfloat16 or float32, got {self.buffer_dtype!r}")
 
@@ -105,6 +112,9 @@ class TrainConfig:
             raise ValueError(f"unknown algorithm {self.algo!r}; choose among {', '.join(ALGORITHMS)}")
         if self.is_selfplay and self.algo != "ppo":
             raise ValueError(f"self-play (env.controlled=controllable) trains with ppo, not {self.algo}")
+        if self.is_selfplay and self.train.traffic != "log":
+            raise ValueError("train.traffic=idm drives the agents by IDM, self-play (env.controlled=controllable) by "
+                             "the policy: choose one")
         if not isinstance(self.env.controlled, str):
             raise ValueError("env.controlled must be sdc or controllable in training")
         if self.algo_config is None:

@@ -96,7 +96,8 @@ def components(config: TrainConfig):
                           action_repeat=action_repeat(config))
     else:
         env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.algo in EXPERT_LABELLED,
-                          action_repeat=action_repeat(config))
+                          action_repeat=action_repeat(config), traffic=config.train.traffic,
+                          traffic_agents=config.train.traffic_agents)
     return env, build_learner(config, env)
 
 
@@ -134,9 +135,9 @@ def data_config(config: TrainConfig, path: str, **changes) -> DataConfig:
 
 def train_data_config(config: TrainConfig, path: str, seed: int) -> DataConfig:
     """The training stream: one scenario at a time, seeded shuffle, repeated forever (with every agent's path
-    under self-play)."""
+    under self-play and IDM traffic)."""
     return data_config(config, path, batch_size=1, shuffle_seed=seed, repeat=True, prefetch=0,
-                       include_agent_paths=config.is_selfplay)
+                       include_agent_paths=config.is_selfplay or config.train.traffic == "idm")
 
 
 # ----------------------------------------------------------------------------- embedded synthetic data
