@@ -57,6 +57,73 @@ def tangents(xy: np.ndarray) -> np.ndarray:
     return np.vstack([seg, seg[-1:]])
 
 
+_CHUNK = 8  # segments per bounding box in the pruned nearest-segment search
+_PRUNE_ABOVE = 15_000  # (points x segments) from which pruning pays for its bookkeeping
+
+
+def _feet(px: np.ndarray, py: np.ndarray, ax: np.ndarray, ay: np.ndarray, sx: np.ndarray, sy: np.ndarray,
+          seg_len2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Foot of each point on each segment and the squared distance to it, in broadcast shapes (points along
+    axis 0): frac, foot x, foot y, squared distance. Separate x and y planes updated in place: a (..., 2)
+    array summed over its last axis costs ~4x more (tiny-axis reductions are slow in numpy)."""
+    frac = (px - ax) * sx
+    frac += (py - ay) * sy
+    frac /= seg_len2
+    np.clip(frac, 0.0, 1.0, out=frac)  # foot position along each segment
+    foot_x, foot_y = frac * sx, frac * sy
+    foot_x += ax
+    foot_y += ay
+    dist2 = px - foot_x
+    dist2 *= dist2
+    dy = py - foot_y
+    dy *= dy
+    dist2 += dy
+    return frac, foot_x, foot_y, dist2
+
+
+def _nearest_all(pts, ax, ay, sx, sy, seg_len2) -> tuple[np.ndarray, ...]:
+    """Nearest segment of each point over all segments: index, frac, foot x, foot y, squared distance (m,) each."""
+    frac, foot_x, foot_y, dist2 = _feet(pts[:, 0:1], pts[:, 1:2], ax, ay, sx, sy, seg_len2)  # (m, k) each
+    best = dist2.argmin(axis=1)  # first of equal minima
+    rows = np.arange(len(pts))
+    return best, frac[rows, best], foot_x[rows, best], foot_y[rows, best], dist2[rows, best]
+
+
+def _nearest_pruned(pts, line, ax, ay, sx, sy, seg_len2) -> tuple[np.ndarray, ...]:
+    """`_nearest_all` computed only on the chunks of `_CHUNK` segments that may hold each point's nearest one
+    (the distance to a chunk's bounding box is at most that to some vertex): the same values, ties included,
+    since every kept segment is computed exactly as in `_nearest_all` and in index order."""
+    m, k = len(pts), len(ax)
+    num_chunks = -(-k // _CHUNK)
+    first = np.arange(num_chunks) * _CHUNK  # (C,) first segment (and vertex) of each chunk
+    # Chunk boxes over its vertices first .. first + _CHUNK (inclusive: the last segment's end).
+    low = np.minimum.reduceat(line, first, axis=0)  # (C, 2)
+    high = np.maximum.reduceat(line, first, axis=0)
+    ends = line[np.minimum(first + _CHUNK, len(line) - 1)]  # (C, 2)
+    low, high = np.minimum(low, ends), np.maximum(high, ends)
+    px, py = pts[:, 0:1], pts[:, 1:2]  # (m, 1)
+    gap_x = np.maximum(np.maximum(low[:, 0] - px, px - high[:, 0]), 0.0)  # (m, C)
+    gap_y = np.maximum(np.maximum(low[:, 1] - py, py - high[:, 1]), 0.0)
+    lower2 = gap_x * gap_x + gap_y * gap_y  # (m, C) squared distance to the box: no segment inside is nearer
+    to_x, to_y = px - line[first, 0], py - line[first, 1]
+    upper2 = (to_x * to_x + to_y * to_y).min(axis=1, keepdims=True)  # (m, 1) some segment is at least this near
+    point, chunk = np.nonzero(lower2 <= upper2 * (1.0 + 1e-9) + 1e-9)  # margin: rounding never prunes the nearest
+    seg = chunk[:, None] * _CHUNK + np.arange(_CHUNK)  # (p, B) ascending per point: argmin's first-of-ties order
+    real = seg < k
+    seg = np.minimum(seg, k - 1)
+    frac, foot_x, foot_y, dist2 = _feet(pts[point, 0:1], pts[point, 1:2], ax[seg], ay[seg], sx[seg], sy[seg],
+                                        seg_len2[seg])  # (p, B) each
+    dist2[~real] = np.inf
+    counts = np.bincount(point, minlength=m) * _CHUNK  # (m,) candidates per point (>= 1 chunk each)
+    starts = np.cumsum(counts) - counts
+    flat = dist2.ravel()
+    nearest = np.minimum.reduceat(flat, starts)  # (m,)
+    hit = np.flatnonzero(flat == np.repeat(nearest, counts))  # ascending
+    owner = np.repeat(np.arange(m), counts)[hit]
+    pick = hit[np.concatenate([[True], owner[1:] != owner[:-1]])]  # (m,) the first minimum of each point
+    return (seg.ravel()[pick], frac.ravel()[pick], foot_x.ravel()[pick], foot_y.ravel()[pick], flat[pick])
+
+
 def project_to_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Nearest point on a polyline for each query point.
 
@@ -67,31 +134,18 @@ def project_to_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.nd
     if len(line) == 1:
         dist = np.linalg.norm(pts - line[0], axis=1)
         return dist, np.zeros(len(pts)), np.broadcast_to(line[0], pts.shape).copy()
-    # x and y as separate (m, n-1) planes, updated in place: a (m, n-1, 2) array summed over its last axis
-    # costs ~4x more (tiny-axis reductions are slow in numpy); the arithmetic, and so every bit, is the same.
-    px, py = pts[:, 0:1], pts[:, 1:2]  # (m, 1)
     ax, ay = line[:-1, 0], line[:-1, 1]  # (n-1,) segment starts
     sx, sy = line[1:, 0] - ax, line[1:, 1] - ay  # (n-1,) segment vectors
     raw_len2 = sx * sx + sy * sy  # (n-1,)
     seg_len2 = np.maximum(raw_len2, 1e-12)
-    frac = (px - ax) * sx
-    frac += (py - ay) * sy
-    frac /= seg_len2
-    np.clip(frac, 0.0, 1.0, out=frac)  # (m, n-1) foot position along each segment
-    foot_x, foot_y = frac * sx, frac * sy
-    foot_x += ax
-    foot_y += ay  # (m, n-1) feet
-    dist2 = px - foot_x
-    dist2 *= dist2
-    dy = py - foot_y
-    dy *= dy
-    dist2 += dy  # (m, n-1) squared distance to each segment
-    best = dist2.argmin(axis=1)
-    rows = np.arange(len(pts))
+    if len(pts) * len(ax) >= _PRUNE_ABOVE and np.isfinite(pts).all() and np.isfinite(line).all():
+        best, frac, foot_x, foot_y, dist2 = _nearest_pruned(pts, line, ax, ay, sx, sy, seg_len2)
+    else:
+        best, frac, foot_x, foot_y, dist2 = _nearest_all(pts, ax, ay, sx, sy, seg_len2)
     cum = np.zeros(len(line))  # arc_lengths(line), from the segment lengths at hand
     np.cumsum(np.sqrt(raw_len2), out=cum[1:])
-    arc = cum[best] + frac[rows, best] * np.sqrt(seg_len2[best])
-    return np.sqrt(dist2[rows, best]), arc, np.stack([foot_x[rows, best], foot_y[rows, best]], axis=1)
+    arc = cum[best] + frac * np.sqrt(seg_len2[best])
+    return np.sqrt(dist2), arc, np.stack([foot_x, foot_y], axis=1)
 
 
 def point_at_arc(polyline: np.ndarray, cum: np.ndarray, arcs: np.ndarray) -> np.ndarray:

@@ -148,3 +148,14 @@ def test_box_pairs_are_the_pairs_of_a_shapely_strtree():
         want = tree.query(shapely.linestrings(np.stack([a0, a1], axis=1)))
         got = box_pairs(np.minimum(a0, a1), np.maximum(a0, a1), np.minimum(b0, b1), np.maximum(b0, b1))
         assert set(zip(*got)) == set(zip(*want))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_pruned_projection_matches_the_reference_on_long_paths(seed):
+    rng = np.random.default_rng(seed)
+    forward = np.cumsum(rng.normal(size=(150, 3)) * [1.0, 1.0, 0.1] + [1.0, 0.0, 0.0], 0) + rng.uniform(-1e4, 1e4, 3)
+    loop = np.vstack([forward, forward[::-1][1:]])  # runs back over itself: every foot has a tie
+    track = forward[::2, :2] + rng.normal(size=(75, 2)) * 2.0
+    for line in (forward, loop):
+        for got, want in zip(project_to_polyline(track, line), _reference_projection(track, line)):
+            np.testing.assert_array_equal(got, want)
