@@ -67,10 +67,16 @@ def road_ids(roads: tuple[RawRoad, ...]) -> tuple[np.ndarray, bool]:
     return np.arange(1, len(roads) + 1, dtype=np.int64), False
 
 
+def _kept_rows(xyz: np.ndarray) -> np.ndarray:
+    """Rows with finite, sane x and y. (n, 3) -> (n,) bool"""
+    with np.errstate(invalid="ignore"):
+        return np.all(np.isfinite(xyz[:, :2]) & (np.abs(xyz[:, :2]) < MAX_ABS_COORD_M), axis=1)
+
+
 def clean_points(xyz: np.ndarray) -> tuple[np.ndarray, int]:
     """Points with finite, sane x and y (z: 0 where absent). (n, 3) -> ((m, 3), n - m)"""
+    keep = _kept_rows(xyz)
     with np.errstate(invalid="ignore"):
-        keep = np.all(np.isfinite(xyz[:, :2]) & (np.abs(xyz[:, :2]) < MAX_ABS_COORD_M), axis=1)
         z = np.where(np.isfinite(xyz[:, 2]) & (np.abs(xyz[:, 2]) < MAX_ABS_COORD_M), xyz[:, 2], 0.0)
     return np.column_stack([xyz[:, :2], z])[keep], int((~keep).sum())
 
@@ -81,10 +87,14 @@ def map_polylines(roads: tuple[RawRoad, ...]) -> MapResult:
     skipped: Counter = Counter()
     dropped = 0
     polylines = []
-    for road, feature_id in zip(roads, ids):
+    # Every road's points cleaned in one pass (clean_points on the concatenation: the same rows), then split.
+    counts = np.array([len(road.xyz) for road in roads], np.int64)  # (R,)
+    xyz = np.concatenate([road.xyz for road in roads]) if roads else np.zeros((0, 3))
+    cleaned, _ = clean_points(xyz)  # (m, 3) the kept rows, road after road
+    kept = np.bincount(np.repeat(np.arange(len(roads)), counts)[_kept_rows(xyz)], minlength=len(roads))
+    for road, feature_id, points, num_points in zip(roads, ids, np.split(cleaned, np.cumsum(kept)[:-1]), counts):
         rg_type = road_type(road)
-        points, num_dropped = clean_points(road.xyz)
-        dropped += num_dropped
+        dropped += int(num_points) - len(points)
         if rg_type is None or len(points) == 0:
             skipped[road.kind if rg_type is None else f"{road.kind} (no points)"] += 1
             continue
