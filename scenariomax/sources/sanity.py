@@ -124,8 +124,8 @@ def wider_than_long(length: np.ndarray, width: np.ndarray, types: np.ndarray,
     length, width = np.asarray(length, np.float64), np.asarray(width, np.float64)
     if length.ndim == 2:
         mask = np.ones(length.shape, bool) if valid is None else np.asarray(valid, bool)
-        length = _nanmedian_last(np.where(mask, length, np.nan))  # an object never valid: NaN
-        width = _nanmedian_last(np.where(mask, width, np.nan))
+        length = nanmedian_last(np.where(mask, length, np.nan))  # an object never valid: NaN
+        width = nanmedian_last(np.where(mask, width, np.nan))
     with np.errstate(invalid="ignore"):
         wide = np.isfinite(length) & np.isfinite(width) & (length > 0) & (width > SWAP_RATIO * length)
     return wide & np.isin(types, SWAP_CHECKED_TYPES)
@@ -143,7 +143,7 @@ def difference_noise(step: np.ndarray, pair: np.ndarray) -> np.ndarray:
     both = pair[:, 1:] & pair[:, :-1]  # (N, T-2) three consecutive usable steps
     change = np.where(both, np.linalg.norm(np.diff(step, axis=1), axis=-1), np.nan)
     # A track without three consecutive steps: NaN, then 0.
-    noise = _nanmedian_last(change) if change.shape[1] else np.full(len(change), np.nan)
+    noise = nanmedian_last(change) if change.shape[1] else np.full(len(change), np.nan)
     return np.nan_to_num(noise, nan=0.0)
 
 
@@ -185,10 +185,10 @@ def local_median(values: np.ndarray, present: np.ndarray, half_window: int = Z_W
     padded = np.pad(np.where(present, values, np.nan), ((0, 0), (half_window, half_window)),
                     constant_values=np.nan)
     windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half_window + 1, axis=1)  # (N, T, W)
-    return _nanmedian_last(windows)
+    return nanmedian_last(windows)
 
 
-def _nanmedian_last(values: np.ndarray) -> np.ndarray:
+def nanmedian_last(values: np.ndarray) -> np.ndarray:
     """np.nanmedian over the last axis, the same bits, without its masked-array path (slow on many small
     windows): sort (NaN last), then the mean of the two middle present values. (..., W) -> (...)"""
     ordered = np.sort(values, axis=-1)  # (..., W)

@@ -111,7 +111,7 @@ def test_lane_arcs_and_tangents_match_the_per_lane_helpers():
 def test_nanmedian_of_the_sanity_checks_matches_numpy():
     import warnings
 
-    from scenariomax.sources.sanity import _nanmedian_last
+    from scenariomax.sources.sanity import nanmedian_last
 
     rng = np.random.default_rng(3)
     values = np.round(rng.normal(size=(30, 40, 7)) * 3, 1)  # ties included
@@ -120,7 +120,7 @@ def test_nanmedian_of_the_sanity_checks_matches_numpy():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         want = np.nanmedian(values, axis=-1)
-    np.testing.assert_array_equal(_nanmedian_last(values), want)
+    np.testing.assert_array_equal(nanmedian_last(values), want)
 
 
 def test_densify_all_matches_densify_per_polyline():

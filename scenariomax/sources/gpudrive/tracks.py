@@ -19,6 +19,7 @@ from scenariomax.sources.sanity import (  # the generic repairs, shared with eve
     consistent_velocity,  # noqa: F401
     fix_yaw_flips,  # noqa: F401
     flipped_steps,  # noqa: F401
+    nanmedian_last,
     swap_rows,
     wider_than_long,
     z_outliers,
@@ -94,8 +95,9 @@ def box_centre_heights(z: np.ndarray, usable: np.ndarray, height: np.ndarray) ->
     if not present.any():
         return np.where(usable, 0.5 * height[:, None], 0.0), 0, False
     scene_median = float(np.median(z[present]))
-    track_median = np.array([np.median(z[row, present[row]]) if present[row].any() else scene_median
-                             for row in range(len(z))]).reshape(-1, 1)  # (N, 1)
+    # Each track's median of its present z (np.median's bits: the mean of the two middle values), all at once.
+    track_median = np.where(present.any(axis=1), nanmedian_last(np.where(present, z, np.nan)),
+                            scene_median)[:, None]  # (N, 1)
     despiked, spikes = z_outliers(np.where(present, z, track_median), present)
     replaced = (usable & ~present) | spikes
     return np.where(usable, despiked, 0.0), int(replaced.sum()), True
