@@ -89,15 +89,27 @@ def _successor_pairs(lanes: Lanes, settings: LaneGraphSettings) -> np.ndarray:
     return pairs[aligned]
 
 
+def _lane_samples(lanes: Lanes, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """One sample every `spacing` metres along each lane: the first of its points at or past each mark (the
+    last point past its end), each point once. All lanes at once. -> point indices (s,), samples per lane (K,)"""
+    cum = np.concatenate(lanes.cumulative) if lanes.num_lanes else np.zeros(0)  # (P,) arc along its lane
+    counts = lanes.counts
+    total = cum[lanes.offsets[1:] - 1]  # (K,) lane lengths (every lane has >= 2 points)
+    num_marks = np.ceil((total + 1e-9) / spacing).astype(np.int64)  # len(np.arange(0, total + 1e-9, spacing))
+    mark_lane = np.repeat(np.arange(lanes.num_lanes), num_marks)
+    marks = (np.arange(num_marks.sum()) - np.repeat(np.cumsum(num_marks) - num_marks, num_marks)) * spacing
+    # np.searchsorted(cum_k, marks) per lane, as one search over (lane, arc) pairs (complex: lexicographic).
+    at = np.searchsorted(lanes.point_lane + 1j * cum, mark_lane + 1j * marks, side="left")
+    at = np.minimum(at, (lanes.offsets[1:] - 1)[mark_lane])  # past a lane's end: its last point
+    fresh = np.ones(len(at), bool)
+    fresh[1:] = at[1:] != at[:-1]  # marks are ascending per lane: duplicates are neighbours
+    samples = at[fresh]
+    return samples, np.bincount(lanes.point_lane[samples], minlength=lanes.num_lanes)
+
+
 def _neighbor_pairs(lanes: Lanes, edge_xy: np.ndarray, settings: LaneGraphSettings) -> tuple[np.ndarray, np.ndarray]:
     """(left pairs, right pairs) as (lane, neighbour) index rows."""
-    stride_points = []
-    for k in range(lanes.num_lanes):
-        cum = lanes.cumulative[k]
-        # One sample every `spacing` metres along the lane (indices of its points).
-        marks = np.searchsorted(cum, np.arange(0.0, cum[-1] + 1e-9, settings.neighbor_sample_spacing_m))
-        stride_points.append(lanes.offsets[k] + np.unique(np.minimum(marks, len(cum) - 1)))
-    samples = np.concatenate(stride_points)
+    samples, samples_per_lane = _lane_samples(lanes, settings.neighbor_sample_spacing_m)
     sample_lane = lanes.point_lane[samples]
     sample_xy = lanes.points[samples, :2]
     sample_dir = lanes.point_tangent[samples]
@@ -134,7 +146,6 @@ def _neighbor_pairs(lanes: Lanes, edge_xy: np.ndarray, settings: LaneGraphSettin
     inverse = inverse.reshape(-1)
     side_votes = np.zeros(len(pair_keys))
     np.add.at(side_votes, inverse, side)
-    samples_per_lane = np.array([len(s) for s in stride_points])
     needed = np.minimum(settings.min_neighbor_samples, samples_per_lane[pair_keys[:, 0]]) if len(pair_keys) else []
     enough = counts >= needed
     left = pair_keys[enough & (side_votes > 0)]

@@ -159,3 +159,22 @@ def test_pruned_projection_matches_the_reference_on_long_paths(seed):
     for line in (forward, loop):
         for got, want in zip(project_to_polyline(track, line), _reference_projection(track, line)):
             np.testing.assert_array_equal(got, want)
+
+
+def test_lane_samples_match_the_per_lane_search():
+    from scenariomax.enrich.lane_graph import _lane_samples
+    from scenariomax.enrich.lanes import Lanes
+
+    rng = np.random.default_rng(6)
+    counts = np.array([2, 5, 40, 3, 17])
+    points = np.concatenate([np.cumsum(rng.normal(size=(c, 3)) * 2.0, 0) for c in counts])
+    lanes = Lanes(np.arange(5), np.zeros(5, np.int64), np.concatenate([[0], np.cumsum(counts)]), points)
+    for spacing in (2.0, 0.7):
+        want = []
+        for k in range(5):
+            cum = lanes.cumulative[k]
+            marks = np.searchsorted(cum, np.arange(0.0, cum[-1] + 1e-9, spacing))
+            want.append(lanes.offsets[k] + np.unique(np.minimum(marks, len(cum) - 1)))
+        samples, per_lane = _lane_samples(lanes, spacing)
+        np.testing.assert_array_equal(samples, np.concatenate(want))
+        np.testing.assert_array_equal(per_lane, [len(w) for w in want])
