@@ -15,11 +15,12 @@ changed and lights without evidence stay unknown.
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
 from scenariomax import schema as sch
-from scenariomax.enrich.geometry import project_to_polyline, tangents
+from scenariomax.enrich.geometry import project_to_polyline
 from scenariomax.enrich.lanes import Lanes
 from scenariomax.scenario import Scenario
 
@@ -50,7 +51,7 @@ def _stop_pose(scenario: Scenario, light: int, lanes: Lanes) -> tuple[np.ndarray
     line = lanes.polyline(lane)
     _, arc, _ = project_to_polyline(stop[None, :2], line)
     k = int(np.clip(np.searchsorted(lanes.cumulative[lane], arc[0]) - 1, 0, len(line) - 1))
-    return stop, tangents(line)[k], lane_id
+    return stop, lanes.point_tangent[lanes.offsets[lane] + k], lane_id  # tangents(line)[k], computed once
 
 
 def _fill_gaps(evidence: np.ndarray, max_gap: int) -> np.ndarray:
@@ -63,22 +64,39 @@ def _fill_gaps(evidence: np.ndarray, max_gap: int) -> np.ndarray:
     return out
 
 
-def light_evidence(scenario: Scenario, stop: np.ndarray, direction: np.ndarray,
-                   settings: LightSettings = LightSettings()) -> tuple[np.ndarray, np.ndarray]:
-    """(green (T,) bool, red (T,) bool) evidence for a stop point and lane direction."""
+class Motion(NamedTuple):
+    """What every light's evidence reads from the vehicles, computed once per scenario. (N, T) each."""
+
+    valid: np.ndarray  # bool: valid vehicle steps
+    cos_yaw: np.ndarray
+    sin_yaw: np.ndarray
+    speed: np.ndarray  # m/s
+
+
+def vehicle_motion(scenario: Scenario) -> Motion:
     vehicles = scenario.object_type == sch.OBJECT_TYPE_VEHICLE
-    valid = scenario.valid & vehicles[:, None]  # (N, T)
+    return Motion(scenario.valid & vehicles[:, None], np.cos(scenario.bbox_yaw), np.sin(scenario.bbox_yaw),
+                  np.hypot(scenario.velocity_x, scenario.velocity_y))
+
+
+def light_evidence(scenario: Scenario, stop: np.ndarray, direction: np.ndarray,
+                   settings: LightSettings = LightSettings(), motion: Motion | None = None) -> tuple[np.ndarray,
+                                                                                                    np.ndarray]:
+    """(green (T,) bool, red (T,) bool) evidence for a stop point and lane direction. `motion`: the scenario's
+    `vehicle_motion`, when the caller has it (it is the same for every light)."""
+    motion = vehicle_motion(scenario) if motion is None else motion
+    valid = motion.valid  # (N, T)
     rel_x, rel_y = scenario.x - stop[0], scenario.y - stop[1]
     along = rel_x * direction[0] + rel_y * direction[1]  # (N, T), > 0 past the stop point
     lateral = np.abs(rel_x * direction[1] - rel_y * direction[0])
-    heading_cos = np.cos(scenario.bbox_yaw) * direction[0] + np.sin(scenario.bbox_yaw) * direction[1]
+    heading_cos = motion.cos_yaw * direction[0] + motion.sin_yaw * direction[1]
     on_lane = valid & (lateral <= settings.lane_halfwidth_m) & (heading_cos > np.cos(np.pi / 4))
     num_steps = scenario.num_timesteps
     crossed = on_lane[:, 1:] & on_lane[:, :-1] & (along[:, :-1] < 0) & (along[:, 1:] >= 0)  # (N, T-1)
     green = np.zeros(num_steps, bool)
     for step in np.flatnonzero(crossed.any(axis=0)) + 1:
         green[max(step - settings.green_window, 0):step + settings.green_window + 1] = True
-    speed = np.hypot(scenario.velocity_x, scenario.velocity_y)
+    speed = motion.speed
     queued = (on_lane & (along < 0) & (along >= -settings.queue_distance_m)
               & (speed < settings.stopped_speed_mps)).any(0)
     dist = np.hypot(rel_x, rel_y)
@@ -98,13 +116,14 @@ def with_inferred_lights(scenario: Scenario, lanes: Lanes, settings: LightSettin
     state, valid, inferred = scenario.tl_state.copy(), scenario.tl_valid.copy(), scenario.tl_inferred.copy()
     lane_id = scenario.tl_lane_id.copy()
     xs, ys, zs = scenario.tl_x.copy(), scenario.tl_y.copy(), scenario.tl_z.copy()
+    motion = vehicle_motion(scenario)
     for light in range(num_lights):
         pose = _stop_pose(scenario, light, lanes)
         if pose is None:
             continue
         stop, direction, controlled = pose
         unknown = ~(valid[light] & (state[light] != sch.TL_UNKNOWN))
-        green, red = light_evidence(scenario, stop, direction, settings)
+        green, red = light_evidence(scenario, stop, direction, settings, motion)
         for evidence, value in ((green, sch.TL_GO), (red, sch.TL_STOP)):
             fill = evidence & unknown
             state[light, fill], valid[light, fill], inferred[light, fill] = value, True, True
