@@ -47,9 +47,9 @@ class LaneGraph:
 
 def _as_tuples(pairs: np.ndarray, num_lanes: int) -> tuple[tuple[int, ...], ...]:
     table: list[list[int]] = [[] for _ in range(num_lanes)]
-    for a, b in pairs:
+    for a, b in np.asarray(pairs).tolist():  # Python ints: iterating numpy scalars is slow
         if b not in table[a]:
-            table[a].append(int(b))
+            table[a].append(b)
     return tuple(tuple(row) for row in table)
 
 
@@ -62,15 +62,16 @@ def has_explicit_links(scenario: Scenario) -> bool:
 def graph_from_scenario_links(scenario: Scenario, lanes: Lanes) -> LaneGraph:
     """The source's explicit lane links, mapped onto lane indices (links to absent lanes dropped)."""
     index_of = lanes.index_of
+    lane_ids, lane_valid = scenario.lane_id.tolist(), scenario.lane_valid.tolist()  # Python values: fast loops
     tables = {}
     for name in ("lane_successors", "lane_predecessors", "lane_left_neighbors", "lane_right_neighbors"):
         pairs = []
-        for row, lane_id in enumerate(scenario.lane_id):
-            if not scenario.lane_valid[row] or int(lane_id) not in index_of:
+        for lane_id, is_valid, row in zip(lane_ids, lane_valid, getattr(scenario, name).tolist()):
+            if not is_valid or lane_id not in index_of:
                 continue
-            for other in getattr(scenario, name)[row]:
-                if other >= 0 and int(other) in index_of:
-                    pairs.append((index_of[int(lane_id)], index_of[int(other)]))
+            for other in row:
+                if other >= 0 and other in index_of:
+                    pairs.append((index_of[lane_id], index_of[other]))
         tables[name] = _as_tuples(np.array(pairs, np.int64).reshape(-1, 2), lanes.num_lanes)
     return LaneGraph(tables["lane_successors"], tables["lane_predecessors"],
                      tables["lane_left_neighbors"], tables["lane_right_neighbors"])

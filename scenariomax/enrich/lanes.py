@@ -79,7 +79,7 @@ class Lanes:
 
     @functools.cached_property
     def index_of(self) -> dict[int, int]:
-        return {int(lane_id): k for k, lane_id in enumerate(self.ids)}
+        return {lane_id: k for k, lane_id in enumerate(self.ids.tolist())}
 
 
 def _norm2d(diff: np.ndarray) -> np.ndarray:
