@@ -78,6 +78,12 @@ class Lanes:
         return cKDTree(self.points[:, :2] if len(self.points) else np.zeros((0, 2)))
 
     @functools.cached_property
+    def memo(self) -> dict:
+        """Scratch space for results derived from these lanes alone (e.g. the path search's whole-lane pieces),
+        shared by every search of one scenario; never part of the lanes' value."""
+        return {}
+
+    @functools.cached_property
     def index_of(self) -> dict[int, int]:
         return {lane_id: k for k, lane_id in enumerate(self.ids.tolist())}
 

@@ -137,9 +137,14 @@ def _lane_hits(lanes: Lanes, track: np.ndarray, radius: float) -> np.ndarray:
     hits = np.zeros(lanes.num_lanes)
     if len(track) == 0:
         return hits
-    for row in lanes.tree.query_ball_point(track, r=radius):
-        if row:
-            hits[np.unique(lanes.point_lane[row])] += 1
+    near = lanes.tree.query_ball_point(track, r=radius)  # (m,) lists of lane point indices
+    sizes = np.fromiter(map(len, near), np.int64, count=len(near))
+    if sizes.sum() == 0:
+        return hits
+    position = np.repeat(np.arange(len(near)), sizes)  # (k,) the logged position of each nearby lane point
+    lane = lanes.point_lane[np.concatenate([row for row in near if row])]
+    pairs = np.unique(position * lanes.num_lanes + lane)  # each (position, lane) once
+    hits += np.bincount(pairs % lanes.num_lanes, minlength=lanes.num_lanes)
     return hits
 
 
@@ -249,6 +254,21 @@ def _lane_change(lanes: Lanes, lane_a: int, arc_from: float, lane_b: int, on_lan
     return _Piece(xyz, lane), float(arc_b[-1])
 
 
+def _rest_of_lane(lanes: Lanes, lane: int, arc: float) -> tuple[_Piece, float]:
+    """The piece of a lane from arc length `arc` to its end, and its length. A whole lane (entered from a
+    predecessor, arc 0) is cut once per scenario: every search of every agent walks the same lanes."""
+    whole = arc == 0.0
+    if whole and lane in lanes.memo:
+        return lanes.memo[lane]
+    line, cum = lanes.polyline(lane), lanes.cumulative[lane]
+    rest = slice_polyline(line, cum, arc, cum[-1])
+    piece = _Piece(rest, np.full(len(rest), lane))
+    out = piece, _piece_length(piece)
+    if whole:
+        lanes.memo[lane] = out
+    return out
+
+
 def _bridge(lanes: Lanes, end: np.ndarray, track: np.ndarray, track_yaw: np.ndarray, visited: tuple,
             settings: PathSettings) -> tuple[_Piece, int, float] | None:
     """Where the lane graph stops but the log drives on (e.g. an intersection connector missing from
@@ -306,10 +326,9 @@ def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], 
                     piece, landing = change
                     children.append((hits[other], (pieces + (piece,), length + _piece_length(piece), other,
                                                    landing, changes + 1, visited + (other,))))
-        line, cum = lanes.polyline(lane), lanes.cumulative[lane]
-        rest = slice_polyline(line, cum, arc, cum[-1])
-        piece = _Piece(rest, np.full(len(rest), lane))
-        total = length + _piece_length(piece)
+        piece, piece_length = _rest_of_lane(lanes, lane, arc)
+        rest = piece.xyz
+        total = length + piece_length
         successors = [s for s in graph.successors[lane] if s not in visited]
         bridge = None
         if total < target and settings.bridge_gaps and not any(hits[s] > 0 for s in successors):
