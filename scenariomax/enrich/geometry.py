@@ -148,6 +148,74 @@ def project_to_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.nd
     return np.sqrt(dist2), arc, np.stack([foot_x, foot_y], axis=1)
 
 
+def project_to_polylines(points: np.ndarray, polylines: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(distance (m,), foot arc (m,)) of the points on each polyline, as `project_to_polyline` gives them (the
+    same values, ties included), for many polylines at once: the pruned search of `_nearest_pruned` with
+    chunks that never straddle two polylines, and one reduction per (point, polyline).
+    points (m, 2+), polylines [(n_i >= 1, 2+)]"""
+    pts = np.asarray(points, np.float64)[:, :2]
+    lines = [np.asarray(line, np.float64)[:, :2] for line in polylines]
+    batch = [k for k, line in enumerate(lines) if len(line) >= 2]
+    out: list = [None] * len(lines)
+    for k in set(range(len(lines))) - set(batch):
+        out[k] = project_to_polyline(pts, lines[k])[:2]
+    if not batch or len(pts) == 0 or not np.isfinite(pts).all() or \
+            not all(np.isfinite(lines[k]).all() for k in batch):
+        for k in batch:
+            out[k] = project_to_polyline(pts, lines[k])[:2]
+        return out
+    num_seg = np.array([len(lines[k]) - 1 for k in batch])  # (L,) segments per polyline
+    vertex = np.concatenate([lines[k] for k in batch])  # (V, 2)
+    v_start = run_starts(num_seg + 1)  # (L,) first vertex of each polyline
+    s_start = run_starts(num_seg)  # (L,) first segment
+    # Segments as project_to_polyline builds them, back to back (a polyline's last vertex starts none).
+    starts = np.delete(np.arange(len(vertex)), v_start + num_seg)  # (S,) start vertex of each segment
+    ax, ay = vertex[starts, 0], vertex[starts, 1]
+    sx, sy = vertex[starts + 1, 0] - ax, vertex[starts + 1, 1] - ay
+    raw_len2 = sx * sx + sy * sy
+    seg_len2 = np.maximum(raw_len2, 1e-12)  # (S,)
+    step = np.zeros(len(vertex))
+    step[starts + 1] = np.sqrt(raw_len2)
+    cum = run_cumsum(step, num_seg + 1)  # (V,) arc length at each vertex along its polyline
+    # Chunks of _CHUNK segments within each polyline.
+    num_chunks = -(-num_seg // _CHUNK)  # (L,)
+    chunk_line = np.repeat(np.arange(len(batch)), num_chunks)  # (C,)
+    chunk_rank = np.arange(num_chunks.sum()) - np.repeat(run_starts(num_chunks), num_chunks)
+    first_seg = chunk_rank * _CHUNK  # (C,) within its polyline
+    first_vertex = v_start[chunk_line] + first_seg  # (C,)
+    last_vertex = v_start[chunk_line] + np.minimum(first_seg + _CHUNK, num_seg[chunk_line])  # inclusive
+    low = np.minimum(np.minimum.reduceat(vertex, first_vertex, axis=0), vertex[last_vertex])  # (C, 2)
+    high = np.maximum(np.maximum.reduceat(vertex, first_vertex, axis=0), vertex[last_vertex])
+    # reduceat runs to the next chunk's first vertex: for a polyline's last chunk that is its own last vertex.
+    px, py = pts[:, 0:1], pts[:, 1:2]  # (m, 1)
+    gap_x = np.maximum(np.maximum(low[:, 0] - px, px - high[:, 0]), 0.0)  # (m, C)
+    gap_y = np.maximum(np.maximum(low[:, 1] - py, py - high[:, 1]), 0.0)
+    lower2 = gap_x * gap_x + gap_y * gap_y
+    to_x, to_y = px - vertex[first_vertex, 0], py - vertex[first_vertex, 1]
+    upper2 = np.minimum.reduceat(to_x * to_x + to_y * to_y, run_starts(num_chunks), axis=1)  # (m, L)
+    point, chunk = np.nonzero(lower2 <= upper2[:, chunk_line] * (1.0 + 1e-9) + 1e-9)
+    line_of = chunk_line[chunk]  # (p,)
+    local = first_seg[chunk][:, None] + np.arange(_CHUNK)  # (p, B) segment index within its polyline
+    real = local < num_seg[line_of][:, None]
+    seg = s_start[line_of][:, None] + np.minimum(local, num_seg[line_of][:, None] - 1)  # (p, B) global
+    frac, _, _, dist2 = _feet(pts[point, 0:1], pts[point, 1:2], ax[seg], ay[seg], sx[seg], sy[seg], seg_len2[seg])
+    dist2[~real] = np.inf
+    # One group per (point, polyline), in (point, polyline, segment) order: the first minimum is argmin's.
+    group = point * len(batch) + line_of  # (p,) ascending
+    counts = np.bincount(group, minlength=len(pts) * len(batch)) * _CHUNK  # every group has >= 1 chunk
+    flat = dist2.ravel()
+    nearest = np.minimum.reduceat(flat, run_starts(counts))  # (m * L,)
+    hit = np.flatnonzero(flat == np.repeat(nearest, counts))
+    owner = np.repeat(np.arange(len(counts)), counts)[hit]
+    pick = hit[np.concatenate([[True], owner[1:] != owner[:-1]])]  # (m * L,)
+    best = seg.ravel()[pick]
+    arc = cum[starts[best]] + frac.ravel()[pick] * np.sqrt(seg_len2[best])
+    dist = np.sqrt(flat[pick])
+    for column, k in enumerate(batch):
+        out[k] = (dist[column::len(batch)], arc[column::len(batch)])
+    return out
+
+
 def point_at_arc(polyline: np.ndarray, cum: np.ndarray, arcs: np.ndarray) -> np.ndarray:
     """Points at the given arc lengths (linear interpolation per coordinate). -> (m, d)"""
     arcs = np.asarray(arcs, np.float64)

@@ -45,6 +45,7 @@ from scenariomax.enrich.geometry import (
     arc_lengths,
     point_at_arc,
     project_to_polyline,
+    project_to_polylines,
     slice_polyline,
 )
 from scenariomax.enrich.lane_graph import LaneGraph
@@ -517,7 +518,7 @@ def _head(path: _Piece, arc: float) -> _Piece:
 
 def _fits(track: np.ndarray, candidates: list[_Piece]) -> list[tuple[np.ndarray, np.ndarray]]:
     """(distance, foot arc) of every logged position on each candidate. -> [((m,), (m,))]"""
-    return [project_to_polyline(track, path.xyz)[:2] for path in candidates]
+    return project_to_polylines(track, [path.xyz for path in candidates])
 
 
 def _pull_to_log(path: _Piece, log: np.ndarray, length: float, at_end: bool) -> _Piece:

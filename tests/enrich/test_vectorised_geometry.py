@@ -178,3 +178,18 @@ def test_lane_samples_match_the_per_lane_search():
         samples, per_lane = _lane_samples(lanes, spacing)
         np.testing.assert_array_equal(samples, np.concatenate(want))
         np.testing.assert_array_equal(per_lane, [len(w) for w in want])
+
+
+def test_projection_onto_many_polylines_matches_one_by_one():
+    from scenariomax.enrich.geometry import project_to_polylines
+
+    rng = np.random.default_rng(7)
+    base = np.cumsum(rng.normal(size=(300, 3)) + [1.0, 0.0, 0.0], 0) + rng.uniform(-1e4, 1e4, 3)
+    lines = [base[:1], base[:2], base[10:250], base[40:120], np.vstack([base[:60], base[:60][::-1][1:]])]
+    lines[2][5] = lines[2][4]  # a zero-length segment
+    track = base[::4, :2] + rng.normal(size=(75, 2)) * 2.0
+    for (dist, arc), line in zip(project_to_polylines(track, lines), lines):
+        want_dist, want_arc, _ = project_to_polyline(track, line)
+        np.testing.assert_array_equal(dist, want_dist)
+        np.testing.assert_array_equal(arc, want_arc)
+    assert project_to_polylines(track, []) == []
