@@ -38,7 +38,8 @@ from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
 from scenariomax.sources.base import MANIFEST_NOTES
 from scenariomax.sources.sanity import STEP_SECONDS, is_nominal_10hz, swap_rows, wider_than_long
-from scenariomax.sources.womd.convert import ScenarioBuildError
+from scenariomax.sources.scenarionet.unpickle import EnumValue
+from scenariomax.sources.womd.convert import ROAD_EDGE_TYPES, ROAD_LINE_TYPES, ScenarioBuildError
 from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, log_window_starts, window_steps, wrap_angle
 
 SOURCE_NAME = "scenarionet"
@@ -73,6 +74,10 @@ MAP_TYPES = {
     # MetaDrive's own names before the March 2023 Scenario Description (its "old format" files)
     "center_lane": sch.RG_LANE_SURFACE_STREET, "stop_sign": sch.RG_STOP_SIGN, "cross_walk": sch.RG_CROSSWALK,
 }
+# MetaDrive 2021-2022 pickled enum members (see unpickle.WRITER_ENUMS) whose values are the WOMD protos':
+# Track.ObjectType for tracks, RoadLine.RoadLineType / RoadEdge.RoadEdgeType for map features.
+ENUM_OBJECT_TYPES = {1: sch.OBJECT_TYPE_VEHICLE, 2: sch.OBJECT_TYPE_PEDESTRIAN, 3: sch.OBJECT_TYPE_CYCLIST}
+ENUM_MAP_TYPES = {"RoadLineType": ROAD_LINE_TYPES, "RoadEdgeType": ROAD_EDGE_TYPES}
 _CLOSED_TYPES = (sch.RG_CROSSWALK, sch.RG_SPEED_BUMP, sch.RG_DRIVEWAY)
 # MetaDrive light strings and WOMD lane-state strings -> WOMD light enum. Early MetaDrive stored the
 # WOMD enum itself (ints 0..8), which is our enum too.
@@ -430,6 +435,8 @@ def feature_type(feature: Mapping) -> int | None:
     kind = feature.get("type")
     if isinstance(kind, str):
         return MAP_TYPES.get(kind)
+    if isinstance(kind, EnumValue):  # MetaDrive 2021-2022: a RoadLineType / RoadEdgeType member
+        return ENUM_MAP_TYPES.get(kind.enum, {}).get(kind.value)
     if kind is feature and "polygon" in feature:
         return sch.RG_SPEED_BUMP
     if kind is None and feature.get("sign") == "cross_walk":
@@ -675,8 +682,7 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iter
     source_arrays, keys, dropped = track_arrays(tracks, num_steps, keep=sdc_key)
     if not keys:
         raise ScenarioBuildError(f"no readable track ({len(dropped)} dropped, e.g. {next(iter(dropped.items()))})")
-    object_types = np.array([OBJECT_TYPES.get(_type_name(as_mapping(tracks[k]).get("type")), sch.OBJECT_TYPE_OTHER)
-                             for k in keys])
+    object_types = np.array([object_type(as_mapping(tracks[k]).get("type")) for k in keys])
     sdc = keys.index(sdc_key) if sdc_key is not None else derived_sdc(
         keys, object_types, source_arrays["valid"], source_arrays["position"])
     arrays = resample_tracks(source_arrays, plan)
@@ -732,6 +738,11 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iter
         yield fit_to_budget(scenario, sizes)
 
 
-def _type_name(value) -> str:
-    """A track's type name; anything but a string (an old writer's enum, a nested dict) is unknown."""
-    return value if isinstance(value, str) else ""
+def object_type(value) -> int:
+    """Our object type of a track's `type`: a type name, or MetaDrive 2021-2022's AgentType member (its
+    WOMD value); anything else (another object, a nested dict) is other."""
+    if isinstance(value, str):
+        return OBJECT_TYPES.get(value, sch.OBJECT_TYPE_OTHER)
+    if isinstance(value, EnumValue) and value.enum == "AgentType":
+        return ENUM_OBJECT_TYPES.get(value.value, sch.OBJECT_TYPE_OTHER)
+    return sch.OBJECT_TYPE_OTHER

@@ -67,6 +67,13 @@ SCENARIO_LIMITS = PickleLimits()
 INDEX_LIMITS = PickleLimits(max_file_bytes=8 << 30, max_opcodes=None, max_built_bytes=1 << 30, max_nodes=None,
                             max_data_bytes=None, max_depth=None)
 
+# Enum classes MetaDrive's 2021-2022 Waymo converter (`waymo_utils.py`, earlier `waymo_map_utils.py`) put in
+# its pickles, with the values each has (those of the WOMD protos: Track.ObjectType, RoadLine.RoadLineType,
+# RoadEdge.RoadEdgeType). Run as a script, it named them `__main__.<class>`; imported, by its module path.
+WRITER_ENUMS: dict[str, range] = {"AgentType": range(5), "RoadLineType": range(9), "RoadEdgeType": range(3)}
+_WRITER_ENUM_MODULES = ("metadrive.utils.waymo_map_utils", "metadrive.utils.waymo_utils.waymo_utils",
+                        "metadrive.utils.waymo_utils.utils")
+
 # Globals a ScenarioNet pickle may name, and why (numpy 1 spells its core `numpy.core`, numpy 2
 # `numpy._core`; protocol <= 2 spells builtins `__builtin__`).
 _NUMPY_CORES = ("numpy.core", "numpy._core")
@@ -85,6 +92,8 @@ ALLOWED_GLOBALS: dict[tuple[str, str], str] = {
        for name in ("list", "dict", "int", "float", "str", "tuple")},
     ("metadrive.scenario.scenario_description", "ScenarioDescription"):
         "a dict subclass (MetaDrive, March 2023): NEWOBJ with no arguments builds a plain dict",
+    **{(module, name): f"an enum member (MetaDrive 2021-2022): `{name}(value)` gives an EnumValue, nothing imported"
+       for module in ("__main__", *_WRITER_ENUM_MODULES) for name in WRITER_ENUMS},
     ("__builtin__", "long"): "defaultdict factory only (Python 3's int in protocol <= 2)",
     ("__builtin__", "unicode"): "defaultdict factory only (Python 3's str in protocol <= 2)",
 }
@@ -129,6 +138,37 @@ class _DictClass:
 
 
 _DICT_CLASSES = {("metadrive.scenario.scenario_description", "ScenarioDescription")}
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class EnumValue:
+    """A member of one of an old writer's enum classes (`WRITER_ENUMS`), as the pickle named it: the class's
+    name and the member's value. The class itself is never imported; the converter maps the value."""
+
+    enum: str
+    value: int
+
+
+class _EnumClass:
+    """Stand-in for a writer's enum class: an Enum member pickles as a call of its class with its value
+    (GLOBAL, the value, REDUCE), so calling this with one of the class's values gives an `EnumValue`."""
+
+    __slots__ = ("module", "name", "values", "charge")
+
+    def __init__(self, module: str, name: str, charge):
+        self.module, self.name, self.values, self.charge = module, name, WRITER_ENUMS[name], charge
+
+    def __call__(self, *args):
+        value = args[0] if len(args) == 1 else None
+        if type(value) is not int or value not in self.values:
+            shown = ", ".join(repr(a)[:20] for a in args)
+            raise _refuse(f"{self.module}.{self.name} called with ({shown}) (only one of its values "
+                          f"{self.values.start}-{self.values.stop - 1})")
+        self.charge(_POINTER_BYTES, "enum member")
+        return EnumValue(self.name, value)
+
+    def __repr__(self) -> str:
+        return f"<enum class {self.module}.{self.name}>"
 
 
 def _sized(value, what: str) -> int:
@@ -256,6 +296,8 @@ def _checked_globals(charge: _Charges, unbuilt: dict[int, object]) -> dict[tuple
             out[(module, name)] = _Builtin(name, type_, calls.get(name))
     out[("__builtin__", "long")], out[("__builtin__", "unicode")] = _Builtin("long", int), _Builtin("unicode", str)
     out.update({key: _DictClass(".".join(key)) for key in _DICT_CLASSES})
+    out.update({(module, name): _EnumClass(module, name, charge) for module in ("__main__", *_WRITER_ENUM_MODULES)
+                for name in WRITER_ENUMS})
     assert set(out) == set(ALLOWED_GLOBALS)
     return out
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import enum
 import pickle
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -103,3 +105,84 @@ def early_metadrive_description(num_steps: int = 91, step_seconds: float = 0.1, 
     if sdc_index is not None:
         desc["sdc_index"] = sdc_index
     return desc
+
+
+# --- MetaDrive 2021-2022 (`waymo_utils.py`): enum members pickled from the writer's `__main__` ----------
+def writer_enums() -> dict[str, type[enum.Enum]]:
+    """Local stand-ins for the converter's enum classes, built from the format: their names, their members'
+    WOMD values (Track.ObjectType, RoadLine.RoadLineType, RoadEdge.RoadEdgeType), defined in `__main__`."""
+    members = {"AgentType": ("UNSET", "VEHICLE", "PEDESTRIAN", "CYCLIST", "OTHER"),
+               "RoadLineType": ("UNKNOWN", "BROKEN_SINGLE_WHITE", "SOLID_SINGLE_WHITE", "SOLID_DOUBLE_WHITE",
+                                "BROKEN_SINGLE_YELLOW", "BROKEN_DOUBLE_YELLOW", "SOLID_SINGLE_YELLOW",
+                                "SOLID_DOUBLE_YELLOW", "PASSING_DOUBLE_YELLOW"),
+               "RoadEdgeType": ("UNKNOWN", "BOUNDARY", "MEDIAN")}
+    classes = {}
+    for name, names in members.items():
+        cls = enum.Enum(name, {member: value for value, member in enumerate(names)}, module="__main__")
+        cls.__qualname__ = name
+        classes[name] = cls
+    return classes
+
+
+def pickle_from_main(obj, classes: dict[str, type], protocol: int) -> bytes:
+    """`obj` pickled as the writer run as a script did: its enum classes named `__main__.<class>` (pickle
+    checks the name resolves, so they sit in `__main__` while pickling only)."""
+    main = sys.modules["__main__"]
+    saved = {name: getattr(main, name) for name in classes if hasattr(main, name)}
+    try:
+        for name, cls in classes.items():
+            setattr(main, name, cls)
+        return pickle.dumps(obj, protocol=protocol)
+    finally:
+        for name in classes:
+            if name in saved:
+                setattr(main, name, saved[name])
+            else:
+                delattr(main, name)
+
+
+def metadrive_2021_description(enums: dict[str, type[enum.Enum]], num_steps: int = 91) -> dict:
+    """A description as MetaDrive's 2021-2022 converter wrote it: tracks keyed by int id with an AgentType
+    member and one (T, 10) state array; the map under `map` (lanes `center_lane` with boundaries holding
+    RoadLineType members, a road line and a road edge typed by members, a `cross_walk`, a `stop_sign`, a
+    speed bump typed by itself); `sdc_index` the SDC's id; `dynamic_map_states` a list holding one dict (the
+    converter appended only its last step) keyed by lane: {state: WOMD int, stop_point: [x, y, z]}.
+
+    Track 7 (vehicle, SDC) drives east at 2 m/s on y = 0; 8 (pedestrian) stands at (5, 3); 9 (cyclist) rides
+    east at 4 m/s on y = 4. Lane 1 on y = 0, lane 2 on y = 4; a solid double yellow line (7) at y = 2, a
+    median edge (2) at y = -2 and a boundary edge (1) at y = 6."""
+    agent, line, edge = enums["AgentType"], enums["RoadLineType"], enums["RoadEdgeType"]
+    t = np.arange(num_steps) * 0.1
+
+    def rows(x, y, size, speed):
+        n = num_steps
+        return np.stack([x, y, 0 * t, *(np.full(n, v) for v in size), 0 * t, np.full(n, speed), 0 * t,
+                         np.ones(n)], axis=1)
+
+    tracks = {7: {"type": agent.VEHICLE, "state": rows(2 * t, 0 * t, (4.5, 2.0, 1.5), 2.0)},
+              8: {"type": agent.PEDESTRIAN, "state": rows(5 + 0 * t, 3 + 0 * t, (0.5, 0.5, 1.8), 0.0)},
+              9: {"type": agent.CYCLIST, "state": rows(4 * t, 4 + 0 * t, (1.8, 0.6, 1.6), 4.0)}}
+
+    def polyline(y):
+        return np.array([[float(x), y, 0.0] for x in range(0, 201, 10)])
+
+    boundary = {"index": [0, 20], "type": line.SOLID_DOUBLE_YELLOW, "id": 3}
+    bump = {"polygon": np.array([[60.0, -1, 0], [61, -1, 0], [61, 1, 0], [60, 1, 0]])}
+    bump["type"] = bump
+    map_features = {
+        1: {"type": "center_lane", "polyline": polyline(0.0), "interpolating": True, "entry": [], "exit": [],
+            "left_boundaries": [boundary], "right_boundaries": [], "left_neighbor": [{"id": 2, "indexes": [0, 20, 0, 20],
+                                                                                      "boundaries": [boundary]}],
+            "right_neighbor": []},
+        2: {"type": "center_lane", "polyline": polyline(4.0), "interpolating": True, "entry": [], "exit": [],
+            "left_boundaries": [], "right_boundaries": [boundary], "left_neighbor": [], "right_neighbor": []},
+        3: {"type": line.SOLID_DOUBLE_YELLOW, "polyline": polyline(2.0)},
+        4: {"type": edge.MEDIAN, "polyline": polyline(-2.0)},
+        5: {"type": edge.BOUNDARY, "polyline": polyline(6.0)},
+        6: {"sign": "cross_walk", "polygon": np.array([[20.0, -1, 0], [22, -1, 0], [22, 1, 0], [20, 1, 0]])},
+        10: {"type": "stop_sign", "lanes": [1], "pos": [50.0, 0.0, 0.0]},
+        11: bump,
+    }
+    lights = [{1: {"state": 6, "stop_point": [50.0, 0.0, 0.0]}}]  # the last step: lane 1 go
+    return {"id": "metadrive-2021", "ts": list(t + 3.0), "tracks": tracks, "dynamic_map_states": lights,
+            "sdc_index": 7, "map": map_features}

@@ -84,8 +84,8 @@ def test_flat_old_format_tracks_with_a_self_referencing_speed_bump(tmp_path):
 
 def test_2021_state_array_and_map_key(tmp_path):
     """MetaDrive 2021-2022: one (T, 10) array [x, y, z, length, width, height, heading, vx, vy, valid] per
-    track, the map under `map`, the SDC's id as `sdc_index` (those files also pickled enum classes, which
-    the restricted unpickler refuses; the layout itself is read)."""
+    track, the map under `map`, the SDC's id as `sdc_index` (the enum members those files also pickled are in
+    test_scenarionet_metadrive_2021.py)."""
     t, ego, ped = _drive(91)
 
     def rows(position, size, heading, speed):
