@@ -535,10 +535,12 @@ def light_points(value, num_steps: int) -> np.ndarray:
     return np.full((num_steps, 3), np.nan)
 
 
-def light_row(light: Mapping, ids: Mapping, num_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(codes, known, lane ids, stop points) at the source rate for one light. Lane and stop point
+def light_row(light: Mapping, ids: Mapping, num_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                                                   bool]:
+    """(codes, known, lane ids, stop points, unread) at the source rate for one light. Lane and stop point
     sit on the light (ScenarioNet) or per step in its state (early MetaDrive, which fills steps
-    without data with lane 0 and stop point (0, 0, 0): those steps are unknown)."""
+    without data with lane 0 and stop point (0, 0, 0): those steps are unknown). `unread`: the light
+    reports a state at some step but no step can be used (its lane is not in the map, no stop point...)."""
     state = as_mapping(light.get("state"))
     codes = [light_code(s) for s in _steps(state.get("object_state"), num_steps)]
     lane_value = light.get("lane") if light.get("lane") is not None else state.get("lane")
@@ -546,14 +548,73 @@ def light_row(light: Mapping, ids: Mapping, num_steps: int) -> tuple[np.ndarray,
     lanes, zero_lane = light_lanes(lane_value, ids, num_steps)
     points = light_points(point_value, num_steps)
     filler = zero_lane & np.all(points == 0, axis=1)
-    known = np.array([c is not None for c in codes], bool) & (lanes >= 0) & np.all(finite32(points), axis=1) & ~filler
-    return np.array([c or 0 for c in codes], np.int64), known, lanes, points
+    reported = np.array([c is not None for c in codes], bool) & ~filler
+    known = reported & (lanes >= 0) & np.all(finite32(points), axis=1)
+    return np.array([c or 0 for c in codes], np.int64), known, lanes, points, bool(reported.any() and not known.any())
 
 
-def light_arrays(lights: Mapping, ids: Mapping, num_steps: int, plan) -> dict[str, np.ndarray]:
-    """(L, T10) arrays at 10 Hz (nearest earlier source step when resampling)."""
+def _lane_states(entry) -> tuple[list[tuple[Any, Any, Any]], int]:
+    """One step of a per-step light list: [(lane, state, stop point)] and the count of items that cannot be
+    read. The step is a dict keyed by lane of {state, stop_point} (MetaDrive 2021-2022) or a list of
+    {lane, state, stop_point} (MetaDrive, March 2023); empty items (the "old format"'s [[{}]]) are nothing."""
+    if isinstance(entry, Mapping):
+        items = [(lane, as_mapping(value)) for lane, value in entry.items()]
+    elif isinstance(entry, (list, tuple)):
+        items = [(as_mapping(value).get("lane"), as_mapping(value)) for value in entry if not _empty(value)]
+    else:
+        return [], int(not _empty(entry))
+    states = [(lane, value.get("state"), value.get("stop_point")) for lane, value in items
+              if lane is not None and value.get("state") is not None]
+    return states, len(items) - len(states)
+
+
+def _empty(value) -> bool:
+    return value is None or (isinstance(value, (Mapping, list, tuple)) and not value)
+
+
+def stepped_lights(steps: list, num_steps: int) -> tuple[dict, int]:
+    """Lights keyed by lane, in ScenarioNet's shape ({lane, stop_point (T, 3), state: {object_state (T,)}}),
+    from a `dynamic_map_states` list with one entry per step, and the count of entries that cannot be read.
+    A list of one entry is MetaDrive 2021-2022's: its converter appended only the last step's states."""
+    if len(steps) not in (num_steps, 1):
+        return {}, sum(not _empty(entry) for entry in steps)
+    first = num_steps - len(steps)  # 0, or the last step for the one-entry list
+    lights, unread = {}, 0
+    for step, entry in enumerate(steps, start=first):
+        states, bad = _lane_states(entry)
+        unread += bad
+        for lane, state, point in states:
+            key = str(lane)
+            if key not in lights:
+                check_cells(len(lights) + 1, num_steps, "traffic lights")
+                lights[key] = {"lane": lane, "stop_point": np.full((num_steps, 3), np.nan),
+                               "state": {"object_state": [None] * num_steps}}
+            lights[key]["state"]["object_state"][step] = state
+            try:
+                lights[key]["stop_point"][step] = _xyz(point)[0]
+            except (TypeError, ValueError, IndexError):
+                pass  # no usable stop point: the step stays unknown (and the light unread if no step is)
+    return lights, unread
+
+
+def light_table(value, num_steps: int) -> tuple[Mapping, int]:
+    """`dynamic_map_states` as lights keyed by id, whatever the writer's generation, and the count of
+    entries that cannot be read: a dict of lights (ScenarioNet), a list per step (MetaDrive before
+    April 2023, see `stepped_lights`), or nothing."""
+    if isinstance(value, Mapping):
+        return value, sum(not isinstance(light, Mapping) and not _empty(light) for light in value.values())
+    if isinstance(value, (list, tuple)):
+        return stepped_lights(list(value), num_steps)
+    return {}, int(not _empty(value))
+
+
+def light_arrays(lights: Mapping, ids: Mapping, num_steps: int, plan) -> tuple[dict[str, np.ndarray], int]:
+    """(L, T10) arrays at 10 Hz (nearest earlier source step when resampling), and the number of lights
+    that report states none of which can be used."""
     check_cells(len(lights), num_steps, "traffic lights")
     rows = [light_row(as_mapping(lights[key]), ids, num_steps) for key in sorted(lights, key=str)]
+    unread = sum(row[4] for row in rows)
+    rows = [row[:4] for row in rows]
     if plan is not None:
         lower = plan[0]
         rows = [(codes[lower], known[lower], lanes[lower], points[lower]) for codes, known, lanes, points in rows]
@@ -568,7 +629,7 @@ def light_arrays(lights: Mapping, ids: Mapping, num_steps: int, plan) -> dict[st
         out["tl_lane_id"][row] = np.where(known, lanes, -1)
         for axis, name in enumerate(("tl_x", "tl_y", "tl_z")):
             out[name][row] = np.where(known, points[:, axis], -1.0)
-    return out
+    return out, unread
 
 
 # --- scenarios -------------------------------------------------------------------------------------
@@ -711,7 +772,10 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iter
     polylines, links = map_polylines(features, map_ids)
     roadgraph = polylines_to_roadgraph(polylines)
     lane_graph = lane_graph_arrays(links, sizes.num_lane_links)
-    lights = light_arrays(as_mapping(desc.get("dynamic_map_states")), map_ids, num_steps, plan)
+    light_states, unread_entries = light_table(desc.get("dynamic_map_states"), num_steps)
+    lights, unread_lights = light_arrays(light_states, map_ids, num_steps, plan)
+    if unread_entries or unread_lights:
+        file_notes["lights_unread"] = unread_entries + unread_lights
     fills = dict(tl_state=0, tl_valid=False, tl_lane_id=-1, tl_x=-1.0, tl_y=-1.0, tl_z=-1.0)
     length = sizes.num_timesteps
     for start in starts:
