@@ -73,7 +73,11 @@ MAP_TYPES = {
     "SPEED_BUMP": sch.RG_SPEED_BUMP, "DRIVEWAY": sch.RG_DRIVEWAY,
     # MetaDrive's own names before the March 2023 Scenario Description (its "old format" files)
     "center_lane": sch.RG_LANE_SURFACE_STREET, "stop_sign": sch.RG_STOP_SIGN, "cross_walk": sch.RG_CROSSWALK,
+    # MetaDrive, March 2023 ("Mar23"): WOMD's solid double white line, and "UNKNOWN" for type 0 of a lane, a
+    # road line or a road edge alike (a lane is told by its links, see `feature_type`; the others stay 0)
+    "ROAD_LINE_DOUBLE_WHITE": sch.RG_SOLID_DOUBLE_WHITE, "UNKNOWN": 0,
 }
+_LANE_KEYS = ("entry_lanes", "exit_lanes", "entry", "exit", "left_boundaries", "right_boundaries")
 # MetaDrive 2021-2022 pickled enum members (see unpickle.WRITER_ENUMS) whose values are the WOMD protos':
 # Track.ObjectType for tracks, RoadLine.RoadLineType / RoadEdge.RoadEdgeType for map features.
 ENUM_OBJECT_TYPES = {1: sch.OBJECT_TYPE_VEHICLE, 2: sch.OBJECT_TYPE_PEDESTRIAN, 3: sch.OBJECT_TYPE_CYCLIST}
@@ -433,6 +437,8 @@ def feature_type(feature: Mapping) -> int | None:
     MetaDrive's converters before April 2023 wrote a crosswalk with no type but `sign: "cross_walk"`, and
     a speed bump whose `type` is the bump itself (a reference cycle)."""
     kind = feature.get("type")
+    if kind == "UNKNOWN" and any(key in feature for key in _LANE_KEYS):
+        return sch.RG_LANE_SURFACE_STREET  # a lane of undefined type is still a drivable lane (as for WOMD)
     if isinstance(kind, str):
         return MAP_TYPES.get(kind)
     if isinstance(kind, EnumValue):  # MetaDrive 2021-2022: a RoadLineType / RoadEdgeType member

@@ -82,6 +82,25 @@ def test_flat_old_format_tracks_with_a_self_referencing_speed_bump(tmp_path):
     np.testing.assert_allclose(scenario.length[scenario.sdc_index, 0], 4.5)
 
 
+def test_march_2023_type_names(tmp_path):
+    """MetaDrive's March 2023 converter named WOMD type 0 "UNKNOWN" for lanes, road lines and road edges
+    alike, and the solid double white line "ROAD_LINE_DOUBLE_WHITE"."""
+    desc = sized_description(flat=True)
+    line = np.array([[0.0, 2, 0], [100, 2, 0]])
+    desc["map_features"].update({
+        "2": {"type": "UNKNOWN", "polyline": np.array([[0.0, 4, 0], [100, 4, 0]]), "speed_limit_mph": 25.0,
+              "entry_lanes": [], "exit_lanes": [], "left_boundaries": [], "right_boundaries": []},
+        "3": {"type": "ROAD_LINE_DOUBLE_WHITE", "polyline": line},
+        "4": {"type": "UNKNOWN", "polyline": line + [0, 4, 0]},
+    })
+    (scenario,) = scenarios(convert(tmp_path, desc))
+    valid = scenario.roadgraph_valid
+    ids, types = scenario.roadgraph_id[valid], scenario.roadgraph_type[valid]
+    assert set(types[ids == 2].tolist()) == {sch.RG_LANE_SURFACE_STREET}
+    assert set(types[ids == 3].tolist()) == {sch.RG_SOLID_DOUBLE_WHITE}
+    assert set(types[ids == 4].tolist()) == {0}
+
+
 def test_2021_state_array_and_map_key(tmp_path):
     """MetaDrive 2021-2022: one (T, 10) array [x, y, z, length, width, height, heading, vx, vy, valid] per
     track, the map under `map`, the SDC's id as `sdc_index` (the enum members those files also pickled are in
