@@ -171,9 +171,8 @@ def metadrive_2021_description(enums: dict[str, type[enum.Enum]], num_steps: int
     bump["type"] = bump
     map_features = {
         1: {"type": "center_lane", "polyline": polyline(0.0), "interpolating": True, "entry": [], "exit": [],
-            "left_boundaries": [boundary], "right_boundaries": [], "left_neighbor": [{"id": 2, "indexes": [0, 20, 0, 20],
-                                                                                      "boundaries": [boundary]}],
-            "right_neighbor": []},
+            "left_boundaries": [boundary], "right_boundaries": [], "right_neighbor": [],
+            "left_neighbor": [{"id": 2, "indexes": [0, 20, 0, 20], "boundaries": [boundary]}]},
         2: {"type": "center_lane", "polyline": polyline(4.0), "interpolating": True, "entry": [], "exit": [],
             "left_boundaries": [], "right_boundaries": [boundary], "left_neighbor": [], "right_neighbor": []},
         3: {"type": line.SOLID_DOUBLE_YELLOW, "polyline": polyline(2.0)},

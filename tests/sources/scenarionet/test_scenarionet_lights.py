@@ -107,7 +107,8 @@ def test_early_metadrive_filler_steps_are_not_unread(tmp_path):
     # a list per step of another length than the log: the steps cannot be placed
     ([[{"lane": "lane-1", "state": "LANE_STATE_GO", "stop_point": [50.0, 0, 0]}]] * 5, 5),
     # a light on a lane the map does not have
-    ({"tl-9": {"lane": "lane-9", "stop_point": [50.0, 0, 0], "state": {"object_state": ["TRAFFIC_LIGHT_RED"] * 91}}}, 1),
+    ({"tl-9": {"lane": "lane-9", "stop_point": [50.0, 0, 0],
+               "state": {"object_state": ["TRAFFIC_LIGHT_RED"] * 91}}}, 1),
     # a light without a stop point
     ({"tl-1": {"lane": "lane-1", "state": {"object_state": ["TRAFFIC_LIGHT_RED"] * 91}}}, 1),
     # a light that is not a dict
