@@ -3,7 +3,8 @@
 Only the globals needed to rebuild plain containers and numpy arrays are allowed; any other global
 (os.system, builtins.exec, a class from some package...) is refused before it is ever looked up,
 so nothing from the file is executed. Even the allowed globals are stand-ins that check their
-arguments (`numpy.ndarray` cannot be called, a `defaultdict` factory must be a plain builtin type).
+arguments (`numpy.ndarray` cannot be called, a `defaultdict` factory must be a plain builtin type; an
+old MetaDrive enum class named by the file only turns one of its values into an `EnumValue`).
 
 A pickle is also a compression format: a few bytes can ask for a huge array, or reference one
 array thousands of times. `PickleLimits` caps both what unpickling may build (opcodes run, bytes
