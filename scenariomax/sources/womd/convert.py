@@ -20,7 +20,7 @@ from scenariomax.enrich.roadgraph import LaneLinks, MapPolyline, lane_graph_arra
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
 from scenariomax.sources.base import MANIFEST_NOTES
-from scenariomax.sources.womd import proto
+from scenariomax.sources.womd import bulk, proto
 from scenariomax.sources.womd.sdc_paths import (
     PATHS_FROM_WAYMO,
     PATHS_SOURCE,
@@ -48,7 +48,7 @@ ROAD_EDGE_TYPES = {proto.ROAD_EDGE_UNKNOWN: sch.RG_ROAD_EDGE_BOUNDARY,
                    proto.ROAD_EDGE_MEDIAN: sch.RG_ROAD_EDGE_MEDIAN}
 KNOWN_OBJECT_TYPES = (sch.OBJECT_TYPE_VEHICLE, sch.OBJECT_TYPE_PEDESTRIAN, sch.OBJECT_TYPE_CYCLIST,
                       sch.OBJECT_TYPE_OTHER)
-_STATE_FIELDS = ("center_x", "center_y", "center_z", "length", "width", "height", "heading", "velocity_x", "velocity_y")
+_STATE_FIELDS = bulk.STATE_FIELDS
 _STATE_GETTER = operator.attrgetter(*_STATE_FIELDS, "valid")
 _POINT_GETTER = operator.attrgetter("x", "y", "z")
 
@@ -57,8 +57,10 @@ class ScenarioBuildError(ValueError):
     """One scenario (or window) cannot be built; the message is one line."""
 
 
-def parse_scenario(data: bytes) -> proto.ScenarioProto:
-    message = proto.ScenarioProto()
+def parse_scenario(data: bytes, bulk: bool = False) -> proto.ScenarioProto:
+    """The Scenario message; `bulk`: the variant that keeps track states and map points as bytes (read in one
+    numpy pass by `track_arrays` and `map_polylines`: the same arrays, several times faster)."""
+    message = proto.ScenarioBulkProto() if bulk else proto.ScenarioProto()
     try:
         message.ParseFromString(data)
     except (DecodeError, RuntimeError, ValueError) as error:
@@ -74,10 +76,15 @@ def track_arrays(message) -> dict[str, np.ndarray]:
     for track in message.tracks:
         if len(track.states) != num_steps:
             raise ScenarioBuildError(f"track {track.id} has {len(track.states)} states, expected {num_steps}")
-    # Every state read in one C-level pass (attrgetter: the fields, then valid) instead of one getattr per
-    # field and step; one array conversion for the whole log.
-    states = [state for track in message.tracks for state in map(_STATE_GETTER, track.states)]
-    table = np.array(states, np.float64).reshape(num_tracks, num_steps, len(_STATE_FIELDS) + 1)  # (N, T, F + 1)
+    if proto.is_bulk(message):  # serialised states, decoded with numpy
+        try:
+            table = bulk.state_table([state for track in message.tracks for state in track.states])
+        except ValueError as error:
+            raise ScenarioBuildError(str(error)) from None
+    else:  # every state read in one C-level pass (attrgetter: the fields, then valid); one array conversion
+        table = np.array([state for track in message.tracks for state in map(_STATE_GETTER, track.states)],
+                         np.float64)
+    table = table.reshape(num_tracks, num_steps, len(_STATE_FIELDS) + 1)  # (N, T, F + 1)
     valid = table[:, :, -1] != 0  # (N, T)
     values = np.where(valid[:, :, None], table[:, :, :-1], -1.0).transpose(2, 0, 1)  # (F, N, T)
     out = dict(zip(_STATE_FIELDS, values))
@@ -86,11 +93,18 @@ def track_arrays(message) -> dict[str, np.ndarray]:
 
 
 # --- map -----------------------------------------------------------------------------------------
-def _point_arrays(containers: list) -> list[np.ndarray]:
-    """The points of every map feature, converted in one pass: (n_i, 3) float64 each."""
+def _point_arrays(containers: list, serialised: bool = False) -> list[np.ndarray]:
+    """The points of every map feature (MapPoint messages, or their bytes when `serialised`), converted in one
+    pass: (n_i, 3) float64 each."""
     counts = [len(points) for points in containers]
-    rows = [xyz for points in containers for xyz in map(_POINT_GETTER, points)]
-    table = np.array(rows, np.float64).reshape(-1, 3)  # (sum n_i, 3)
+    if serialised:
+        try:
+            table = bulk.point_table([point for points in containers for point in points])
+        except ValueError as error:
+            raise ScenarioBuildError(str(error)) from None
+    else:
+        rows = [xyz for points in containers for xyz in map(_POINT_GETTER, points)]
+        table = np.array(rows, np.float64).reshape(-1, 3)  # (sum n_i, 3)
     return np.split(table, np.cumsum(counts)[:-1]) if containers else []
 
 
@@ -121,7 +135,7 @@ def map_polylines(message) -> tuple[list[MapPolyline], list[LaneLinks]]:
             rg_type = {"crosswalk": sch.RG_CROSSWALK, "speed_bump": sch.RG_SPEED_BUMP,
                        "driveway": sch.RG_DRIVEWAY}[kind]
             features.append((fid, rg_type, getattr(feature, kind).polygon, -1.0, True))
-    points = _point_arrays([container for _, _, container, _, _ in features])
+    points = _point_arrays([container for _, _, container, _, _ in features], proto.is_bulk(message))
     polylines = [MapPolyline(fid, rg_type, xyz, speed_limit=limit, closed=closed)
                  for (fid, rg_type, _, limit, closed), xyz in zip(features, points) if len(xyz)]
     return orient_road_edges(polylines, sch.ROAD_EDGE_TYPES, sch.LANE_TYPES), links

@@ -86,18 +86,28 @@ _MESSAGES = (
 _ONEOF_FIELDS = {"MapFeature": ("lane", "road_line", "road_edge", "stop_sign", "crosswalk", "speed_bump", "driveway")}
 
 
-def _build_pool() -> descriptor_pool.DescriptorPool:
-    file_proto = descriptor_pb2.FileDescriptorProto(name="vmax_womd_scenario.proto", package=_PACKAGE,
-                                                    syntax="proto2")
+# The bulk variant of the messages (the converter's fast path): the same wire format, but the many small
+# messages (track states, map points) are kept as their serialised bytes, so that a whole log or map is joined
+# and read with numpy in one go instead of one Python object per state or point.
+_BULK_PACKAGE = "vmax.womd_bulk"
+_AS_BYTES = {("Track", "states"), ("LaneCenter", "polyline"), ("RoadEdge", "polyline"), ("RoadLine", "polyline"),
+             ("Crosswalk", "polygon"), ("SpeedBump", "polygon"), ("Driveway", "polygon"), ("StopSign", "position")}
+
+
+def _build_pool(package: str, as_bytes: set) -> descriptor_pool.DescriptorPool:
+    file_proto = descriptor_pb2.FileDescriptorProto(name=f"{package.replace('.', '_')}_scenario.proto",
+                                                    package=package, syntax="proto2")
     for name, fields in _MESSAGES:
         message = file_proto.message_type.add(name=name)
         oneof_members = _ONEOF_FIELDS.get(name, ())
         if oneof_members:
             message.oneof_decl.add(name="feature_data")
         for field_name, number, field_type, label, type_name in fields:
+            if (name, field_name) in as_bytes:
+                field_type, type_name = _F.TYPE_BYTES, None
             field = message.field.add(name=field_name, number=number, type=field_type, label=label)
             if type_name is not None:
-                field.type_name = f".{_PACKAGE}.{type_name}"
+                field.type_name = f".{package}.{type_name}"
             if field_name in oneof_members:
                 field.oneof_index = 0
     pool = descriptor_pool.DescriptorPool()
@@ -105,15 +115,24 @@ def _build_pool() -> descriptor_pool.DescriptorPool:
     return pool
 
 
-_POOL = _build_pool()
+_POOL = _build_pool(_PACKAGE, set())
+_BULK_POOL = _build_pool(_BULK_PACKAGE, _AS_BYTES)
 
 
-def _message_class(name: str):
-    return message_factory.GetMessageClass(_POOL.FindMessageTypeByName(f"{_PACKAGE}.{name}"))
+def _message_class(name: str, pool: descriptor_pool.DescriptorPool = _POOL, package: str = _PACKAGE):
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(f"{package}.{name}"))
 
 
 ScenarioProto = _message_class("Scenario")
 MapFeatureProto = _message_class("MapFeature")
+ObjectStateProto = _message_class("ObjectState")
+MapPointProto = _message_class("MapPoint")
+ScenarioBulkProto = _message_class("Scenario", _BULK_POOL, _BULK_PACKAGE)
+
+
+def is_bulk(message) -> bool:
+    """Whether a Scenario message is the bulk variant (states and map points as bytes)."""
+    return message.DESCRIPTOR.full_name.startswith(_BULK_PACKAGE + ".")
 
 # Enum values (facts of the WOMD protos).
 TRACK_TYPE_UNSET = 0

@@ -88,7 +88,7 @@ class WomdSource:
             if fmt == FORMAT_TF_EXAMPLE:
                 yield tf_example_to_scenario(record, self.budget)
                 return
-            message = parse_scenario(record)
+            message = parse_scenario(record, bulk=True)
             ref = message.scenario_id or ref
             for item in scenario_windows(message, self.budget, self.window_stride, self.sdc_paths):
                 yield Failure(unit, ref, one_line(item)) if isinstance(item, Exception) else item
