@@ -39,14 +39,15 @@ _STATE_Z_ONLY = _layout([("center_z", 4, "<f8"), ("valid", 11, "u1")])
 _POINT_FULL = _layout([("x", 1, "<f8"), ("y", 2, "<f8"), ("z", 3, "<f8")])  # MapPoint, 27 bytes
 
 
-def _matching(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
+def _matching(messages: list[bytes], lengths: np.ndarray,
               layout: tuple[np.dtype, dict[str, int]]) -> tuple[np.ndarray, np.ndarray]:
     """Which messages are exactly `layout` (length, tag bytes, one-byte varints), and those decoded.
-    data: all messages back to back (uint8); starts, lengths (n,). -> (n,) bool, (k,) records"""
+    lengths (n,) of the messages. -> (n,) bool, (k,) records"""
     dtype, tags = layout
     candidates = np.flatnonzero(lengths == dtype.itemsize)  # (c,)
-    raw = data[starts[candidates, None] + np.arange(dtype.itemsize)]  # (c, itemsize) bytes
-    records = raw.view(dtype).reshape(-1)  # (c,)
+    same = len(candidates) == len(messages)  # all of one length: join them all, no selection
+    joined = b"".join(messages if same else [messages[row] for row in candidates.tolist()])
+    records = np.frombuffer(joined, dtype)  # (c,)
     ok = np.ones(len(candidates), bool)
     for tag, value in tags.items():
         ok &= records[tag] == value
@@ -58,11 +59,8 @@ def _matching(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray,
     return matched, records[ok]
 
 
-def _joined(messages: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """All messages back to back as uint8, with each one's start and length. -> (b,), (n,), (n,)"""
-    lengths = np.fromiter(map(len, messages), np.int64, count=len(messages))
-    data = np.frombuffer(b"".join(messages), np.uint8)
-    return data, np.cumsum(lengths) - lengths, lengths
+def _lengths(messages: list[bytes]) -> np.ndarray:
+    return np.fromiter(map(len, messages), np.int64, count=len(messages))
 
 
 def _parse_each(message_class, messages: list[bytes], rows: np.ndarray, getter) -> list[tuple]:
@@ -82,14 +80,14 @@ def state_table(states: list[bytes]) -> np.ndarray:
     table = np.zeros((len(states), len(STATE_FIELDS) + 1))
     if not states:
         return table
-    data, starts, lengths = _joined(states)
+    lengths = _lengths(states)
     done = np.zeros(len(states), bool)
-    full, records = _matching(data, starts, lengths, _STATE_FULL)
+    full, records = _matching(states, lengths, _STATE_FULL)
     for column, name in enumerate(STATE_FIELDS):
         table[full, column] = records[name]
     table[full, -1] = records["valid"] != 0
     done |= full
-    z_only, records = _matching(data, starts, lengths, _STATE_Z_ONLY)
+    z_only, records = _matching(states, lengths, _STATE_Z_ONLY)
     table[z_only, STATE_FIELDS.index("center_z")] = records["center_z"]
     table[z_only, -1] = records["valid"] != 0
     done |= z_only
@@ -104,8 +102,7 @@ def point_table(points: list[bytes]) -> np.ndarray:
     table = np.zeros((len(points), 3))
     if not points:
         return table
-    data, starts, lengths = _joined(points)
-    full, records = _matching(data, starts, lengths, _POINT_FULL)
+    full, records = _matching(points, _lengths(points), _POINT_FULL)
     for column, name in enumerate(("x", "y", "z")):
         table[full, column] = records[name]
     rest = np.flatnonzero(~full)
