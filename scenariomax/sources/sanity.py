@@ -106,10 +106,24 @@ def flipped_steps(yaw: np.ndarray, usable: np.ndarray) -> np.ndarray:
     return flipped
 
 
+def _has_jump(yaw: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """Tracks with a heading jump of about FLIP_RAD between consecutive usable steps (a margin below it: a
+    superset of the tracks `flipped_steps` can flip). (N, T), (N, T) -> (N,) bool"""
+    steps = np.arange(yaw.shape[1])
+    last = np.maximum.accumulate(np.where(usable, steps, -1), axis=1)  # (N, T) last usable step up to t
+    previous = np.concatenate([np.full((len(yaw), 1), -1), last[:, :-1]], axis=1)  # before t
+    has_previous = usable & (previous >= 0)
+    rows = np.arange(len(yaw))[:, None]
+    step = np.asarray(yaw, np.float64) - np.asarray(yaw, np.float64)[rows, np.maximum(previous, 0)]
+    with np.errstate(invalid="ignore"):
+        return (has_previous & ~(np.abs(wrap_angle(step)) <= FLIP_RAD - 1e-6)).any(axis=1)
+
+
 def fix_yaw_flips(yaw: np.ndarray, usable: np.ndarray, types: np.ndarray) -> tuple[np.ndarray, int]:
     """Turns flipped boxes of vehicles and cyclists back. (N, T), (N, T), (N,) -> ((N, T), steps fixed)"""
     flipped = np.zeros(yaw.shape, bool)
-    for row in np.flatnonzero(np.isin(types, FLIP_CHECKED_TYPES)):
+    # A track without a jump between consecutive usable steps has nothing flipped: only the others are walked.
+    for row in np.flatnonzero(np.isin(types, FLIP_CHECKED_TYPES) & _has_jump(yaw, usable)):
         flipped[row] = flipped_steps(yaw[row], usable[row])
     return np.where(flipped, wrap_angle(yaw + np.pi), yaw), int(flipped.sum())
 
@@ -208,7 +222,13 @@ def z_outliers(z: np.ndarray, present: np.ndarray) -> tuple[np.ndarray, np.ndarr
     A present step more than Z_OUTLIER_M from the local median of its track (see Z_WINDOW_STEPS)
     takes that median; other steps are unchanged."""
     z = np.asarray(z, np.float64)
-    reference = local_median(z, present)
+    # A track whose present z are finite and span at most Z_OUTLIER_M has no spike (its medians lie within that
+    # span): only the others get the sliding median.
+    finite = present & np.isfinite(z)
+    span = np.where(finite, z, -np.inf).max(axis=1) - np.where(finite, z, np.inf).min(axis=1)  # (N,) -inf: none
+    check = np.flatnonzero((span > Z_OUTLIER_M - 1e-6) | (present & ~finite).any(axis=1))
+    reference = np.full(z.shape, np.nan)
+    reference[check] = local_median(z[check], present[check])
     with np.errstate(invalid="ignore"):
         replaced = present & np.isfinite(reference) & (np.abs(z - reference) > Z_OUTLIER_M)
     return np.where(replaced, reference, z), replaced

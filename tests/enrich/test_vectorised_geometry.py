@@ -193,3 +193,34 @@ def test_projection_onto_many_polylines_matches_one_by_one():
         np.testing.assert_array_equal(dist, want_dist)
         np.testing.assert_array_equal(arc, want_arc)
     assert project_to_polylines(track, []) == []
+
+
+def test_sanity_prefilters_change_nothing():
+    """z_outliers and fix_yaw_flips skip the tracks that cannot need a repair: the result is the one of
+    repairing every track."""
+    from scenariomax.sources import sanity
+
+    rng = np.random.default_rng(8)
+    z = rng.normal(size=(40, 91)) * 0.2 + rng.uniform(-50, 50, (40, 1))
+    z[3, 40] += 30.0  # a spike
+    z[5, 10] = np.inf  # a present non-finite z
+    z[6, :] = np.nan
+    present = rng.random(z.shape) < 0.9
+    present[3, 40] = present[5, 10] = True
+    reference = sanity.local_median(z, present)  # every track
+    with np.errstate(invalid="ignore"):
+        replaced = present & np.isfinite(reference) & (np.abs(z - reference) > sanity.Z_OUTLIER_M)
+    got, got_replaced = sanity.z_outliers(z, present)
+    np.testing.assert_array_equal(got_replaced, replaced)
+    np.testing.assert_array_equal(got, np.where(replaced, reference, z))
+    assert replaced[3, 40] and replaced[5, 10]
+
+    yaw = np.cumsum(rng.normal(size=(30, 91)) * 0.02, axis=1)
+    yaw[2, 30:32] += np.pi  # a two-step flip
+    yaw[4, 50] += np.pi
+    usable = rng.random(yaw.shape) < 0.95
+    types = np.full(30, sanity.FLIP_CHECKED_TYPES[0])
+    want = np.stack([sanity.flipped_steps(yaw[row], usable[row]) for row in range(30)])
+    fixed, count = sanity.fix_yaw_flips(yaw, usable, types)
+    np.testing.assert_array_equal(fixed, np.where(want, sanity.wrap_angle(yaw + np.pi), yaw))
+    assert count == want.sum() > 0
