@@ -228,11 +228,9 @@ def densify_all(polylines: Sequence[np.ndarray], spacing: float) -> np.ndarray:
     on_dense = dense[vertex_run]
     run = np.concatenate([grid_run, vertex_run[on_dense]])
     arcs = np.concatenate([grid, cum[on_dense]])
-    order = np.lexsort((arcs, run))
-    run, arcs = run[order], arcs[order]
-    fresh = np.ones(len(arcs), bool)
-    fresh[1:] = (run[1:] != run[:-1]) | (arcs[1:] != arcs[:-1])  # np.union1d drops equal values
-    run, arcs = run[fresh], arcs[fresh]
+    key = np.sort(run + 1j * arcs)  # (polyline, arc) pairs in order (complex numbers sort lexicographically)
+    key = key[np.concatenate([np.ones(min(len(key), 1), bool), key[1:] != key[:-1]])]  # union1d: no repeats
+    run, arcs = key.real.astype(np.int64), key.imag
     dense_rank = np.cumsum(dense) - 1  # index of each densified polyline among them
     points = run_interp(arcs, dense_rank[run], cum[on_dense], xy[on_dense], counts[dense])  # (k, 2)
     # Back in polyline order: densified points, or the raw points of the polylines left as they are.
