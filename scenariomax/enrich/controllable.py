@@ -15,11 +15,11 @@ import dataclasses
 from collections.abc import Iterable
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from scenariomax import schema as sch
 from scenariomax.enrich.lane_graph import LaneGraph
 from scenariomax.enrich.lanes import Lanes, nearest_lane_points
+from scenariomax.enrich.lanes import edge_tree as shared_edge_tree
 from scenariomax.enrich.paths import Path, PathSettings, logged_track, search_paths
 from scenariomax.scenario import Scenario
 
@@ -74,7 +74,7 @@ def controllable_mask(scenario: Scenario, lanes: Lanes,
     edges = np.isin(scenario.roadgraph_type, sch.ROAD_EDGE_TYPES) & scenario.roadgraph_valid
     edge_xy = scenario.roadgraph_xyz[edges, :2].astype(np.float64)
     edge_dir = scenario.roadgraph_dir[edges, :2].astype(np.float64)
-    edge_tree = cKDTree(edge_xy) if len(edge_xy) else None
+    edge_tree = shared_edge_tree(lanes, edge_xy) if len(edge_xy) else None
     mask = np.zeros(scenario.num_objects, bool)
     full = scenario.valid.all(axis=1) & (scenario.object_type == sch.OBJECT_TYPE_VEHICLE)
     for index in np.flatnonzero(full):

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from scenariomax import schema as sch
-from scenariomax.enrich.lanes import Lanes
+from scenariomax.enrich.lanes import Lanes, edge_tree
 from scenariomax.enrich.roadgraph import LaneLinks, lane_graph_arrays
 from scenariomax.scenario import Scenario
 
@@ -94,7 +94,6 @@ def _lane_samples(lanes: Lanes, spacing: float) -> tuple[np.ndarray, np.ndarray]
     """One sample every `spacing` metres along each lane: the first of its points at or past each mark (the
     last point past its end), each point once. All lanes at once. -> point indices (s,), samples per lane (K,)"""
     cum = np.concatenate(lanes.cumulative) if lanes.num_lanes else np.zeros(0)  # (P,) arc along its lane
-    counts = lanes.counts
     total = cum[lanes.offsets[1:] - 1]  # (K,) lane lengths (every lane has >= 2 points)
     num_marks = np.ceil((total + 1e-9) / spacing).astype(np.int64)  # len(np.arange(0, total + 1e-9, spacing))
     mark_lane = np.repeat(np.arange(lanes.num_lanes), num_marks)
@@ -134,7 +133,7 @@ def _neighbor_pairs(lanes: Lanes, edge_xy: np.ndarray, settings: LaneGraphSettin
     rows, other, offset = rows[ok], other[ok], offset[ok]
     if len(edge_xy) and len(rows):
         midpoints = sample_xy[rows] + 0.5 * offset
-        clearance, _ = cKDTree(edge_xy).query(midpoints, k=1)
+        clearance, _ = edge_tree(lanes, edge_xy).query(midpoints, k=1)
         clear = clearance > settings.edge_clearance_m
         rows, other, offset = rows[clear], other[clear], offset[clear]
     side = np.sign(sample_dir[rows, 0] * offset[:, 1] - sample_dir[rows, 1] * offset[:, 0])  # + left

@@ -88,6 +88,17 @@ class Lanes:
         return {lane_id: k for k, lane_id in enumerate(self.ids.tolist())}
 
 
+def edge_tree(lanes: Lanes, edge_xy: np.ndarray) -> cKDTree:
+    """A cKDTree over road-edge points (k, 2) of the lanes' scenario, built once: the lane graph and the
+    controllable labels query the same points (kept in `lanes.memo`, rebuilt when other points are asked)."""
+    cached = lanes.memo.get("edge_tree")
+    if cached is not None and cached[0].shape == edge_xy.shape and np.array_equal(cached[0], edge_xy):
+        return cached[1]
+    tree = cKDTree(edge_xy)
+    lanes.memo["edge_tree"] = (edge_xy.copy(), tree)
+    return tree
+
+
 def _norm2d(diff: np.ndarray) -> np.ndarray:
     """np.linalg.norm(diff[:, :2], axis=1) with the same bits. (n, 2+) -> (n,)"""
     return np.sqrt(diff[:, 0] * diff[:, 0] + diff[:, 1] * diff[:, 1])
