@@ -270,12 +270,26 @@ def _rest_of_lane(lanes: Lanes, lane: int, arc: float) -> tuple[_Piece, float]:
     return out
 
 
-def _bridge(lanes: Lanes, end: np.ndarray, track: np.ndarray, track_yaw: np.ndarray, visited: tuple,
+def _rejoin_candidates(lanes: Lanes, track: np.ndarray, track_yaw: np.ndarray,
+                       settings: PathSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For every logged position, its 8 nearest lane points within `rejoin_radius_m`: found, their lane (-1
+    when not found) and whether it runs within `rejoin_heading_deg` of the logged heading. (m, 8) each"""
+    dist, idx = lanes.tree.query(track, k=8, distance_upper_bound=settings.rejoin_radius_m)
+    hit = np.isfinite(dist)
+    lane_of = np.where(hit, lanes.point_lane[np.where(hit, idx, 0)], -1)
+    heading = np.stack([np.cos(track_yaw), np.sin(track_yaw)], 1)
+    tangent = lanes.point_tangent[np.where(hit, idx, 0)]
+    aligned = (tangent * heading[:, None, :]).sum(-1) > np.cos(np.radians(settings.rejoin_heading_deg))
+    return hit, lane_of, aligned
+
+
+def _bridge(lanes: Lanes, end: np.ndarray, track: np.ndarray, rejoins: tuple[np.ndarray, ...], visited: tuple,
             settings: PathSettings) -> tuple[_Piece, int, float] | None:
     """Where the lane graph stops but the log drives on (e.g. an intersection connector missing from
     a cropped map): follow the logged positions from the lane's end to the first lane the log
     rejoins (within `rejoin_radius_m`, heading aligned). Bridge points carry the joined lane's id.
-    Returns (piece, joined lane, arc on it) or None."""
+    Returns (piece, joined lane, arc on it) or None. `rejoins`: `_rejoin_candidates` of the track (the same
+    for every bridge of a search: computed once)."""
     if len(track) < 2:
         return None
     gap = np.linalg.norm(track - end[:2], axis=1)
@@ -283,12 +297,7 @@ def _bridge(lanes: Lanes, end: np.ndarray, track: np.ndarray, track_yaw: np.ndar
     if gap[first] > settings.max_bridge_start_gap_m or first + 1 >= len(track):
         return None
     later = track[first + 1:]
-    dist, idx = lanes.tree.query(later, k=8, distance_upper_bound=settings.rejoin_radius_m)
-    hit = np.isfinite(dist)
-    lane_of = np.where(hit, lanes.point_lane[np.where(hit, idx, 0)], -1)
-    heading = np.stack([np.cos(track_yaw[first + 1:]), np.sin(track_yaw[first + 1:])], 1)
-    tangent = lanes.point_tangent[np.where(hit, idx, 0)]
-    aligned = (tangent * heading[:, None, :]).sum(-1) > np.cos(np.radians(settings.rejoin_heading_deg))
+    hit, lane_of, aligned = (values[first + 1:] for values in rejoins)  # the positions after the lane's end
     fresh = ~np.isin(lane_of, np.asarray(visited))
     ok = hit & aligned & fresh
     rows = np.flatnonzero(ok.any(axis=1))
@@ -310,6 +319,7 @@ def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], 
     target = (settings.points_per_path - 1) * settings.spacing_m
     hits = _lane_hits(lanes, track, settings.track_hit_radius_m)
     on_lanes = _TrackNearLanes(lanes, track, settings.max_change_offset_m)
+    rejoins = None  # _rejoin_candidates, on the first bridge
     # State: (pieces so far, length so far, lane, entry arc, lane changes used, lanes visited)
     stack = [((), 0.0, lane, arc, 0, (lane,)) for lane, arc in reversed(starts)]
     results: list[tuple[_Piece, ...]] = []
@@ -333,7 +343,9 @@ def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], 
         successors = [s for s in graph.successors[lane] if s not in visited]
         bridge = None
         if total < target and settings.bridge_gaps and not any(hits[s] > 0 for s in successors):
-            bridge = _bridge(lanes, rest[-1], track, track_yaw, visited, settings)
+            if rejoins is None:
+                rejoins = _rejoin_candidates(lanes, track, track_yaw, settings)
+            bridge = _bridge(lanes, rest[-1], track, rejoins, visited, settings)
         if total >= target or not (successors or bridge):
             results.append(pieces + (piece,))
         else:
