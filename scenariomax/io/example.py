@@ -128,7 +128,9 @@ def _feature_chunks(value: FeatureValue) -> list[bytes]:
     array = np.asarray(value)
     if array.dtype.kind == "f":
         tag, data = 0x12, array.astype("<f4", copy=False).ravel().tobytes()  # Feature.float_list
-    elif array.dtype.kind in "iub":
+    elif array.dtype.kind == "b":
+        tag, data = 0x1A, np.ascontiguousarray(array).view(np.uint8).tobytes()  # masks: 0 / 1, one byte each
+    elif array.dtype.kind in "iu":
         tag, data = 0x1A, varints(array.ravel())  # Feature.int64_list
     else:
         raise TypeError(f"unsupported dtype {array.dtype}")
