@@ -224,3 +224,13 @@ def test_sanity_prefilters_change_nothing():
     fixed, count = sanity.fix_yaw_flips(yaw, usable, types)
     np.testing.assert_array_equal(fixed, np.where(want, sanity.wrap_angle(yaw + np.pi), yaw))
     assert count == want.sum() > 0
+
+
+def test_distance_to_points_matches_the_three_axis_formula():
+    from scenariomax.crop import distance_to_points
+
+    rng = np.random.default_rng(9)
+    points, anchors = rng.normal(size=(5000, 2)) * 300 + 1e4, rng.normal(size=(91, 2)) * 100 + 1e4
+    want = np.sqrt(((points[:, None, :] - anchors[None, :, :]) ** 2).sum(-1).min(axis=1))
+    np.testing.assert_array_equal(distance_to_points(points, anchors, chunk=1000), want)
+    np.testing.assert_array_equal(distance_to_points(points, anchors[:0]), np.zeros(5000))
