@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from scenariomax.enrich.geometry import row_norm
 from scenariomax.scenario import Scenario
 
 
@@ -22,7 +23,7 @@ def roadgraph_directions(xyz: np.ndarray, ids: np.ndarray, valid: np.ndarray) ->
         return dirs.astype(np.float32)
     has_next = (ids[1:] == ids[:-1]) & valid[1:] & valid[:-1]  # (R-1,)
     step = np.diff(xyz, axis=0)
-    norm = np.linalg.norm(step, axis=1)
+    norm = row_norm(step)
     usable = has_next & (norm > 1e-6)
     # For a repeated point, look ahead to the next usable step; it must still be in the same run.
     index = np.where(usable, np.arange(len(step)), len(step))

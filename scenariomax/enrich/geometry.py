@@ -42,9 +42,19 @@ def arc_lengths(xy: np.ndarray) -> np.ndarray:
     return out
 
 
+def row_norm(vectors: np.ndarray) -> np.ndarray:
+    """np.linalg.norm(vectors, axis=-1) for a short last axis (2 or 3), the same bits (squares summed in order)
+    without numpy's slow reduction over a tiny axis. (..., d) -> (...)"""
+    vectors = np.asarray(vectors)
+    total = vectors[..., 0] * vectors[..., 0]
+    for k in range(1, vectors.shape[-1]):
+        total = total + vectors[..., k] * vectors[..., k]
+    return np.sqrt(total)
+
+
 def unit(vectors: np.ndarray) -> np.ndarray:
     """Rows scaled to unit norm (zero rows stay zero). (n, d) -> (n, d)"""
-    norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    norm = row_norm(vectors)[..., None]
     return np.where(norm > 1e-9, vectors / np.maximum(norm, 1e-9), 0.0)
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from scenariomax import schema as sch
-from scenariomax.enrich.geometry import polyline_runs, run_cumsum, run_interp, run_starts
+from scenariomax.enrich.geometry import polyline_runs, row_norm, run_cumsum, run_interp, run_starts
 from scenariomax.enrich.lanes import Lanes
 from scenariomax.enrich.roadgraph import MapPolyline
 from scenariomax.scenario import Scenario
@@ -64,14 +64,14 @@ def _segments(edges: Sequence[np.ndarray], closed: Sequence[bool]) -> tuple[np.n
     if not starts:
         return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, np.int64)
     start, end, owner = np.concatenate(starts), np.concatenate(ends), np.concatenate(owners)
-    keep = np.linalg.norm(end - start, axis=1) > 1e-6
+    keep = row_norm(end - start) > 1e-6
     return start[keep], end[keep], owner[keep]
 
 
 def _vote_samples(start: np.ndarray, end: np.ndarray, owner: np.ndarray, num_edges: int, spacing: float):
     """Points every `spacing` m along each edge (piece centres). -> point (M, 2), unit tangent (M, 2),
     owning edge (M,), weight = length the point stands for (M,)."""
-    seg_len = np.linalg.norm(end - start, axis=1)
+    seg_len = row_norm(end - start)
     edge_len = np.bincount(owner, seg_len, minlength=num_edges)
     has = np.bincount(owner, minlength=num_edges) > 0
     pieces = np.where(has, np.maximum(np.ceil(edge_len / spacing), 1), 0).astype(np.int64)
@@ -154,7 +154,7 @@ def _sight_blocked(origin: np.ndarray, target: np.ndarray, start: np.ndarray, en
     safe = np.where(np.abs(denom) > 1e-12, denom, 1.0)
     s = (ap[:, 0] * e[:, 1] - ap[:, 1] * e[:, 0]) / safe  # along the sight segment
     u = (ap[:, 0] * d[:, 1] - ap[:, 1] * d[:, 0]) / safe  # along the edge segment
-    sight_len = np.linalg.norm(d, axis=1)
+    sight_len = row_norm(d)
     crosses = (np.abs(denom) > 1e-12) & (s * sight_len > _SIGHT_EPS_M) & (s <= 1.0) & (u >= 0.0) & (u <= 1.0)
     blocked[sight[crosses]] = True
     return blocked

@@ -51,7 +51,6 @@ from scenariomax.enrich.geometry import (
 from scenariomax.enrich.lane_graph import LaneGraph
 from scenariomax.enrich.lanes import Lanes
 
-
 # Scenario.metadata key naming who made the SDC paths when a source ships its own (e.g. "waymo": WOMD 1.3.1
 # Scenario protos); enrichment keeps such paths instead of reconstructing them.
 PATHS_SOURCE = "paths_source"

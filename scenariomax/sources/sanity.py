@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from scenariomax import schema as sch
-from scenariomax.enrich.geometry import wrap_angle
+from scenariomax.enrich.geometry import row_norm, wrap_angle
 from scenariomax.scenario import Scenario
 from scenariomax.sources.base import MANIFEST_NOTES
 
@@ -155,7 +155,7 @@ def swap_rows(length: np.ndarray, width: np.ndarray, rows: np.ndarray) -> tuple[
 def difference_noise(step: np.ndarray, pair: np.ndarray) -> np.ndarray:
     """Median change between consecutive position differences of each track, m/s. (N, T-1, 2), (N, T-1) -> (N,)"""
     both = pair[:, 1:] & pair[:, :-1]  # (N, T-2) three consecutive usable steps
-    change = np.where(both, np.linalg.norm(np.diff(step, axis=1), axis=-1), np.nan)
+    change = np.where(both, row_norm(np.diff(step, axis=1)), np.nan)
     # A track without three consecutive steps: NaN, then 0.
     noise = nanmedian_last(change) if change.shape[1] else np.full(len(change), np.nan)
     return np.nan_to_num(noise, nan=0.0)
@@ -179,11 +179,11 @@ def consistent_velocity(xy: np.ndarray, velocity: np.ndarray, usable: np.ndarray
     slack = np.where(has_backward, 0.0, NOISE_FACTOR * difference_noise(step, pair)[:, None])  # (N, T)
 
     def agrees(reference: np.ndarray, present: np.ndarray, extra: np.ndarray | float = 0.0) -> np.ndarray:
-        tolerance = VELOCITY_TOL_MPS + VELOCITY_TOL_FRACTION * np.linalg.norm(reference, axis=-1) + extra
-        return present & (np.linalg.norm(velocity - reference, axis=-1) <= tolerance)
+        tolerance = VELOCITY_TOL_MPS + VELOCITY_TOL_FRACTION * row_norm(reference) + extra
+        return present & (row_norm(velocity - reference) <= tolerance)
 
     with np.errstate(invalid="ignore", over="ignore"):
-        sane = np.all(np.isfinite(velocity), axis=-1) & (np.linalg.norm(velocity, axis=-1) < MAX_SPEED_MPS)
+        sane = np.all(np.isfinite(velocity), axis=-1) & (row_norm(velocity) < MAX_SPEED_MPS)
         checkable = has_backward | has_forward
         matches = agrees(backward, has_backward) | agrees(forward, has_forward, slack)
     derived = usable & (~sane | (checkable & ~matches))
@@ -282,7 +282,7 @@ def sanity_repairs(scenario: Scenario) -> tuple[dict[str, np.ndarray], dict[str,
         logged = np.stack([scenario.velocity_x, scenario.velocity_y], axis=-1).astype(np.float64)
         derived_velocity, derived = consistent_velocity(xy, logged, valid)
         # Only steps whose value moves count: a source that already derived them (GPUDrive) is not repaired twice.
-        changed = derived & (np.linalg.norm(derived_velocity - logged, axis=-1) > 1e-3)
+        changed = derived & (row_norm(derived_velocity - logged) > 1e-3)
         if changed.any():
             vx = np.where(changed, derived_velocity[..., 0], scenario.velocity_x)
             vy = np.where(changed, derived_velocity[..., 1], scenario.velocity_y)

@@ -234,3 +234,13 @@ def test_distance_to_points_matches_the_three_axis_formula():
     want = np.sqrt(((points[:, None, :] - anchors[None, :, :]) ** 2).sum(-1).min(axis=1))
     np.testing.assert_array_equal(distance_to_points(points, anchors, chunk=1000), want)
     np.testing.assert_array_equal(distance_to_points(points, anchors[:0]), np.zeros(5000))
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_row_norm_is_numpy_norm(dtype):
+    from scenariomax.enrich.geometry import row_norm
+
+    rng = np.random.default_rng(10)
+    for width in (2, 3):
+        vectors = (rng.normal(size=(20, 500, width)) * 10 ** rng.uniform(-3, 3, (20, 500, 1))).astype(dtype)
+        np.testing.assert_array_equal(row_norm(vectors), np.linalg.norm(vectors, axis=-1))

@@ -11,6 +11,7 @@ from scenariomax.io.tfrecord import RecordError, iter_records
 from scenariomax.schema import Sizes
 from scenariomax.sources.base import Failure, UnitItem, expand_inputs
 from scenariomax.sources.womd.convert import SOURCE_NAME, ScenarioBuildError, parse_scenario, scenario_windows
+from scenariomax.sources.womd.sdc_paths import SDC_PATHS_AUTO, SDC_PATHS_MODES
 from scenariomax.sources.womd.tfexample import (
     FORMAT_AUTO,
     FORMAT_SCENARIO,
@@ -18,7 +19,6 @@ from scenariomax.sources.womd.tfexample import (
     looks_like_tf_example,
     tf_example_to_scenario,
 )
-from scenariomax.sources.womd.sdc_paths import SDC_PATHS_AUTO, SDC_PATHS_MODES
 from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE
 
 FILE_PATTERN = "*tfrecord*"
