@@ -75,7 +75,7 @@ def _shuffled(scenarios: Iterable, rng: np.random.Generator, buffer_size: int) -
         yield buffer[slot]
 
 
-def _indexed_scenarios(config: DataConfig, cache: MapIndexCache | None) -> Iterator[IndexedScenario]:
+def _indexed_records(config: DataConfig, cache: MapIndexCache | None) -> Iterator[IndexedRecord]:
     files = _shard_files(config.path)
     rng = np.random.default_rng(config.shuffle_seed) if config.shuffle_seed is not None else None
     while True:
@@ -85,11 +85,16 @@ def _indexed_scenarios(config: DataConfig, cache: MapIndexCache | None) -> Itera
             stream = _shuffled(stream, rng, config.shuffle_buffer)
         for item in stream:
             count += 1
-            yield _read(item)
+            yield item
         if count == 0:
             raise InputError(f"{config.path}: the shard files hold no scenarios")
         if not config.repeat:
             return
+
+
+def _indexed_scenarios(config: DataConfig, cache: MapIndexCache | None) -> Iterator[IndexedScenario]:
+    for item in _indexed_records(config, cache):
+        yield _read(item)
 
 
 def iter_scenarios(config: DataConfig) -> Iterator[Scenario]:
@@ -102,6 +107,18 @@ def iter_indexed_scenarios(config: DataConfig) -> Iterator[IndexedScenario]:
     """`iter_scenarios`, each with where its map index comes from (the cache, when on); convert the pairs with
     `indexed_to_numpy_state`. Skipping pairs costs the decode only."""
     yield from _indexed_scenarios(config, open_map_index_cache(config))
+
+
+def iter_indexed_records(config: DataConfig) -> Iterator[IndexedRecord]:
+    """`iter_indexed_scenarios` before the records are read: where each record lies and where its map index comes
+    from. Skipping one reads nothing (several training processes each read only their own share);
+    `read_indexed_record` reads one."""
+    yield from _indexed_records(config, open_map_index_cache(config))
+
+
+def read_indexed_record(item: IndexedRecord) -> IndexedScenario:
+    """The scenario of a pair from `iter_indexed_records` (checked as `iter_indexed_scenarios` checks it)."""
+    return _read(item)
 
 
 def _conversion_config(source: IndexSource | None, config: DataConfig) -> DataConfig:

@@ -15,7 +15,7 @@ import numpy as np
 
 from scenariomax.errors import InputError
 from vmax_sim.data.config import DataConfig
-from vmax_sim.data.loader import IndexedScenario, iter_indexed_scenarios
+from vmax_sim.data.loader import IndexedRecord, IndexedScenario, iter_indexed_records, read_indexed_record
 
 SYNTHETIC = "synthetic"  # the embedded synthetic training split, as a source name
 
@@ -73,8 +73,15 @@ def iter_mixed_indexed_scenarios(config: DataConfig, sources: tuple[WeightedSour
                                  seed: int) -> Iterator[IndexedScenario]:
     """Draws forever from `sources` (config.path is ignored): each source a repeated stream shuffled with its own
     seed, the source of each draw from a generator seeded with `seed`."""
-    streams = [iter_indexed_scenarios(dataclasses.replace(config, path=source.path, shuffle_seed=seed + 1 + i,
-                                                          repeat=True))
+    for item in iter_mixed_indexed_records(config, sources, seed):
+        yield read_indexed_record(item)
+
+
+def iter_mixed_indexed_records(config: DataConfig, sources: tuple[WeightedSource, ...],
+                               seed: int) -> Iterator[IndexedRecord]:
+    """`iter_mixed_indexed_scenarios` before the records are read (vmax_sim.data.loader.iter_indexed_records)."""
+    streams = [iter_indexed_records(dataclasses.replace(config, path=source.path, shuffle_seed=seed + 1 + i,
+                                                        repeat=True))
                for i, source in enumerate(sources)]
     probabilities = source_probabilities(sources)
     rng = np.random.default_rng([seed, len(sources)])
