@@ -123,11 +123,37 @@ def _check_data(specs, deep: bool, skip: bool, quiet: bool) -> None:
                    "train.eval_every, train.checkpoint_every, train.keep_checkpoints, train.max_wall_minutes, "
                    "e.g. to extend a run). Ctrl-C or SIGTERM during a run saves a checkpoint first.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--coordinator", default=None, metavar="HOST:PORT",
+              help="Several processes train one run (jax.distributed): process 0's address and a free port, the same "
+                   "in every process [env JAX_COORDINATOR_ADDRESS]. See docs/learning.md, 'Multi-process and "
+                   "multi-host'.")
+@click.option("--num-processes", type=click.IntRange(1), default=None,
+              help="How many processes train the run [env JAX_NUM_PROCESSES].")
+@click.option("--process-id", type=click.IntRange(0), default=None,
+              help="This process's index, 0 .. num-processes - 1 [env JAX_PROCESS_ID].")
+@click.option("--distributed", "detect", is_flag=True,
+              help="Join a multi-process run, taking the settings not given from the cluster (SLURM's srun, Open MPI's "
+                   "mpirun).")
 @_check_options
 @click.argument("overrides", nargs=-1)
-def train(preset, data, eval_data, out, resume_dir, quiet, deep, skip_checks, overrides):
+def train(preset, data, eval_data, out, resume_dir, quiet, coordinator, num_processes, process_id, detect, deep,
+          skip_checks, overrides):
     """Train a policy. OVERRIDES are section.field=value, e.g. algo.learning_rate=3e-4 train.total_env_steps=1e5."""
     import time as _time
+
+    from vmax_sim.training.distributed import distributed_settings, initialize, is_primary
+
+    try:  # before anything touches JAX
+        settings = distributed_settings(coordinator, num_processes, process_id, detect)
+        if settings is not None:
+            if not (out or resume_dir):
+                _fail("several processes train one run directory: name it with --out (or --resume)")
+            initialize(settings)
+    except InputError as error:
+        _fail(one_line(error))
+    primary = settings is None or is_primary()
+    echo = click.echo if primary else (lambda *args, **kwargs: None)  # process 0 reports
+    quiet = quiet or not primary
 
     from vmax_sim.training import apply_overrides, preset_config
     from vmax_sim.training import train as run_training
@@ -140,7 +166,7 @@ def train(preset, data, eval_data, out, resume_dir, quiet, deep, skip_checks, ov
 
             resumed = load_run_config(resume_dir).data
             _check_data([resumed.train, resumed.eval], deep, skip_checks, quiet)
-            result = run_training(None, resume_dir, resume=True, progress=not quiet, print_fn=click.echo,
+            result = run_training(None, resume_dir, resume=True, progress=not quiet, print_fn=echo,
                                   resume_overrides=overrides)
         else:
             config = preset_config(preset)
@@ -148,18 +174,18 @@ def train(preset, data, eval_data, out, resume_dir, quiet, deep, skip_checks, ov
             config = apply_overrides(config, extra + list(overrides))
             _check_data([config.data.train, config.data.eval], deep, skip_checks, quiet)
             run_dir = out or f"runs/{preset}-{_time.strftime('%Y%m%d-%H%M%S')}"
-            click.echo(f"run directory: {run_dir}")
-            result = run_training(config, run_dir, progress=not quiet, print_fn=click.echo)
+            echo(f"run directory: {run_dir}")
+            result = run_training(config, run_dir, progress=not quiet, print_fn=echo)
     except (InputError, ValueError, OSError) as error:
         _fail(one_line(error))
     if result.interrupted:  # the checkpoint and the resume command were printed
         raise SystemExit(130)
-    click.echo(f"trained {result.env_steps:,} env steps in {result.wall_s / 60:.1f} min "
-               f"({result.env_steps_per_s:,.0f} env steps/s); run directory {result.run_dir}")
+    echo(f"trained {result.env_steps:,} env steps in {result.wall_s / 60:.1f} min "
+         f"({result.env_steps_per_s:,.0f} env steps/s); run directory {result.run_dir}")
     if result.final_evaluation:
         from vmax_sim.evaluation import format_summary
 
-        click.echo(format_summary(result.final_evaluation))
+        echo(format_summary(result.final_evaluation))
 
 
 @main.command()

@@ -7,6 +7,9 @@ moment leaves the previous checkpoints intact; `latest_step` only sees finished 
 The replay buffer (hundreds of MB) is its own item, written by `ReplayHandler` as one `.npy` file per
 leaf, a few MB at a time: Orbax's array writer copies each whole array to the host and TensorStore encodes
 it again before writing (up to two buffers' worth of extra memory while saving, on the CPU too).
+With several processes (`jax.distributed`) each writes the blocks its devices hold, one file per block
+(`<leaf>.b<block>.npy`; one process writes the replicated scalars): no two hosts write into one file, which
+shared file systems do not all allow. Either layout restores under one process or several.
 """
 
 from __future__ import annotations
@@ -88,29 +91,88 @@ def _fill(store: jax.Array, part: jax.Array, block: jax.Array, start: jax.Array)
     return jax.lax.dynamic_update_slice(store, part.astype(store.dtype), starts)
 
 
-def _write_leaf(path: Path, leaf: jax.Array) -> None:
-    """An .npy file of `leaf`, copied from the device one slice at a time."""
+def _write_leaf(path: Path, leaf: jax.Array, block: int | None = None) -> None:
+    """An .npy file of `leaf` (or of its block `block` only, leading axis 1), copied from the device one slice at a
+    time."""
+    shape = tuple(leaf.shape) if block is None else (1,) + tuple(leaf.shape[1:])
     with path.open("wb") as handle:
         header = {"descr": np.lib.format.dtype_to_descr(np.dtype(leaf.dtype)), "fortran_order": False,
-                  "shape": tuple(leaf.shape)}
+                  "shape": shape}
         np.lib.format.write_array_header_2_0(handle, header)
-        for block, start, stop in _slices(tuple(leaf.shape), np.dtype(leaf.dtype).itemsize):
-            part = leaf if leaf.ndim < 2 else _take(leaf, block, start, stop - start)
+        for index, start, stop in _slices(shape, np.dtype(leaf.dtype).itemsize):
+            if leaf.ndim < 2:
+                part = leaf if block is None else leaf[block:block + 1]
+            else:
+                part = _take(leaf, index + (block or 0), start, stop - start)
             handle.write(np.ascontiguousarray(jax.device_get(part)).data)
 
 
-def _read_leaf(path: Path, like: jax.Array) -> jax.Array:
-    """`like` (a fresh array, donated) filled from the .npy file at `path`, one slice at a time."""
-    saved = np.load(path, mmap_mode="r")
-    if saved.shape != tuple(like.shape) or saved.dtype != like.dtype:
-        raise InputError(f"{path}: replay buffer of shape {saved.shape} {saved.dtype}, this configuration's is "
+def _block_file(folder: Path, index: int, block: int) -> Path:
+    return folder / f"{index}.b{block}.npy"
+
+
+def _write_own_blocks(folder: Path, index: int, leaf: jax.Array) -> None:
+    """The blocks of a leaf split over several processes' devices that this process holds, one file each
+    (every block is written once: by the process holding its first replica)."""
+    if leaf.ndim == 0:  # replicated: process 0 writes it
+        if jax.process_index() == 0:
+            _write_leaf(folder / f"{index}.npy", leaf.addressable_data(0))
+        return
+    for shard in leaf.addressable_shards:
+        if shard.replica_id != 0:
+            continue
+        first = shard.index[0].start or 0
+        for offset in range(shard.data.shape[0]):
+            _write_leaf(_block_file(folder, index, first + offset), shard.data, block=offset)
+
+
+def _saved_blocks(folder: Path, index: int, like: jax.Array):
+    """block -> the saved rows of that block (memory-mapped, leading axis 1), from the leaf's one file or its
+    per-block files; InputError when the shapes differ from `like`'s."""
+    whole = folder / f"{index}.npy"
+    if whole.exists() or like.ndim == 0:
+        saved = np.load(whole, mmap_mode="r")
+        shape, dtype, where = saved.shape, saved.dtype, whole
+        block_of = lambda block: saved[block:block + 1]  # noqa: E731
+    else:
+        first = np.load(_block_file(folder, index, 0), mmap_mode="r")
+        count = len(list(folder.glob(f"{index}.b*.npy")))
+        shape, dtype, where = (count,) + first.shape[1:], first.dtype, _block_file(folder, index, 0)
+        block_of = lambda block: np.load(_block_file(folder, index, block), mmap_mode="r")  # noqa: E731
+    if shape != tuple(like.shape) or dtype != like.dtype:
+        raise InputError(f"{where}: replay buffer of shape {shape} {dtype}, this configuration's is "
                          f"{tuple(like.shape)} {like.dtype}; resume with the run's own configuration")
+    if like.ndim == 0:
+        return lambda block: saved
+    return block_of
+
+
+def _read_leaf(folder: Path, index: int, like: jax.Array) -> jax.Array:
+    """`like` (a fresh array, donated) filled from the saved leaf, one slice at a time."""
+    block_of = _saved_blocks(folder, index, like)
     if like.ndim < 2:
+        saved = block_of(0) if like.ndim == 0 else np.concatenate([block_of(b) for b in range(like.shape[0])])
         return jax.device_put(np.array(saved), like.sharding)
     for block, start, stop in _slices(tuple(like.shape), like.dtype.itemsize):
-        part = np.ascontiguousarray(saved[block:block + 1, start:stop])
+        part = np.ascontiguousarray(block_of(block)[:, start:stop])
         like = _fill(like, jnp.asarray(part), block, start)  # uncommitted: placed like `like`
     return like
+
+
+def _read_own_blocks(folder: Path, index: int, like: jax.Array) -> jax.Array:
+    """The saved leaf as a global array sharded like `like` (several processes): each process reads only the
+    blocks its devices hold, one device's share in host memory at a time. `like` is deleted first."""
+    block_of = _saved_blocks(folder, index, like)
+    shape, sharding = tuple(like.shape), like.sharding
+    like.delete()  # a fresh buffer: its memory goes to the restored one
+
+    def read(where) -> np.ndarray:
+        if not shape:
+            return np.array(block_of(0))
+        blocks = range(*where[0].indices(shape[0]))
+        return np.concatenate([np.asarray(block_of(block)) for block in blocks])[(slice(None),) + where[1:]]
+
+    return jax.make_array_from_callback(shape, sharding, read)
 
 
 class ReplayHandler(ocp.CheckpointHandler):
@@ -120,13 +182,16 @@ class ReplayHandler(ocp.CheckpointHandler):
         folder = Path(str(directory))
         folder.mkdir(parents=True, exist_ok=True)
         for index, leaf in enumerate(jax.tree.leaves(args.item)):
-            _write_leaf(folder / f"{index}.npy", leaf)
+            if jax.process_count() > 1:
+                _write_own_blocks(folder, index, leaf)
+            else:
+                _write_leaf(folder / f"{index}.npy", leaf)
 
     def restore(self, directory, args: ReplayRestore):
         folder = Path(str(directory))
         leaves, treedef = jax.tree.flatten(args.item)
-        return jax.tree.unflatten(treedef, [_read_leaf(folder / f"{index}.npy", leaf)
-                                            for index, leaf in enumerate(leaves)])
+        read = _read_own_blocks if jax.process_count() > 1 else _read_leaf
+        return jax.tree.unflatten(treedef, [read(folder, index, leaf) for index, leaf in enumerate(leaves)])
 
     def metadata(self, directory) -> None:
         return None

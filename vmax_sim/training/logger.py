@@ -16,15 +16,18 @@ STEP_KEY = "env_steps"
 
 
 class RunLogger:
-    def __init__(self, run_dir: Path, tensorboard: bool = True, file_name: str = "metrics.csv"):
+    """`write=False` keeps the rows in memory only (the processes of a multi-process run other than process 0)."""
+
+    def __init__(self, run_dir: Path, tensorboard: bool = True, file_name: str = "metrics.csv", write: bool = True):
         self.path = Path(run_dir) / file_name
-        self.rows: list[dict[str, float]] = self._read()
+        self.write = write
+        self.rows: list[dict[str, float]] = self._read() if write else []
         self.columns: list[str] = list(self.rows[0].keys()) if self.rows else [STEP_KEY]
         for row in self.rows:
             self.columns += [k for k in row if k not in self.columns]
         self._writer = None
         self._events: _QuietEvents | None = None
-        if tensorboard:
+        if tensorboard and write:
             try:
                 from tensorboardX import SummaryWriter
             except ImportError:
@@ -51,7 +54,9 @@ class RunLogger:
         row.update({k: float(v) for k, v in scalars.items()})
         self.rows.append(row)
         new = [k for k in row if k not in self.columns]
-        if new or not self.path.exists():  # a new column, or the first row (after a truncation to nothing too)
+        if not self.write:
+            self.columns += new
+        elif new or not self.path.exists():  # a new column, or the first row (after a truncation to nothing too)
             self.columns += new
             self._rewrite()
         else:
@@ -63,6 +68,8 @@ class RunLogger:
                     self._writer.add_scalar(key, value, env_steps)
 
     def _rewrite(self) -> None:
+        if not self.write:
+            return
         if not self.rows:
             self.path.unlink(missing_ok=True)
             return

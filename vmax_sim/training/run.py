@@ -9,10 +9,15 @@ RUN_DIR/
   eval.csv             the held-out evaluations (accuracy, V-Max score, ...)
   learning_curve.png   accuracy and V-Max score against env steps and wall time
   summary.json         the final evaluation and run statistics
+
+Several processes (`jax.distributed`, `vmax-sim train --coordinator ...`) train one run over one global mesh:
+every process steps its devices' environments and converts its share of the scenario stream, writes its part of
+each checkpoint, and process 0 alone writes the rest of the run directory (vmax_sim.training.distributed).
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import json
@@ -36,6 +41,7 @@ from vmax_sim.data.mixture import SYNTHETIC, format_sources, parse_sources, sour
 from vmax_sim.env.learning import LearningEnv
 from vmax_sim.env.selfplay import SelfPlayEnv
 from vmax_sim.networks import make_encoder
+from vmax_sim.training import distributed
 from vmax_sim.training.checkpoint import CheckpointStore
 from vmax_sim.training.config import (
     TrainConfig,
@@ -58,8 +64,16 @@ from vmax_sim.training.loop import (
     transition_of,
 )
 from vmax_sim.training.memory import release_freed_memory
-from vmax_sim.training.parallel import data_mesh, shard_carry
-from vmax_sim.training.pool import ScenarioStream, initial_pool, pool_shapes, rebuild_pool, refresh_pool
+from vmax_sim.training.parallel import data_mesh, replay_shardings, replicated_placer, shard_carry
+from vmax_sim.training.pool import (
+    WHOLE_STREAM,
+    ScenarioStream,
+    StreamShare,
+    initial_pool,
+    pool_shapes,
+    rebuild_pool,
+    refresh_pool,
+)
 from vmax_sim.training.replay import MIN_TRUNCATED_LENGTH, lost_last_observations, replay_bytes, replay_init
 
 CONFIG_FILE = "config.json"
@@ -335,6 +349,19 @@ class TrainingSetup:
     per_chunk: int  # env steps per chunk
     mesh: object  # jax Mesh or None
     buffer_mib: float
+    place: Callable | None = None  # host rows -> replicated over several processes' devices (None: one process)
+
+
+def stream_share(pool_size: int) -> StreamShare:
+    """This process's share of the training stream: all of it, or with several processes every
+    num_processes-th scenario (the pool's first fill must give each process one)."""
+    processes = distributed.num_processes()
+    if processes == 1:
+        return WHOLE_STREAM
+    if pool_size < processes:
+        raise ValueError(f"train.pool_size={pool_size} is smaller than the {processes} processes: each converts a "
+                         f"share of the pool's scenarios; choose at least {processes}")
+    return StreamShare(jax.process_index(), processes, distributed.exchange)
 
 
 def setup_training(config: TrainConfig, train_path: str, print_fn: Callable[[str], None] = print,
@@ -347,6 +374,7 @@ def setup_training(config: TrainConfig, train_path: str, print_fn: Callable[[str
     num_envs = algo_config.num_envs
     mesh = data_mesh(num_envs)
     blocks = mesh.size if mesh else 1
+    share = stream_share(loop.pool_size)
     data_config = train_data_config(config, train_path, loop.seed)
     env_key, learner_key, loop_key = jax.random.split(jax.random.PRNGKey(loop.seed), 3)
     float_dtype = _float_dtype(loop.buffer_dtype)
@@ -389,9 +417,9 @@ def setup_training(config: TrainConfig, train_path: str, print_fn: Callable[[str
     release_freed_memory()
 
     if consumed is not None:
-        pool, stream = rebuild_pool(data_config, consumed, loop.pool_size)
+        pool, stream = rebuild_pool(data_config, consumed, loop.pool_size, share=share)
     else:
-        stream = ScenarioStream(data_config)
+        stream = ScenarioStream(data_config, share=share)
         pool = initial_pool(stream, loop.pool_size)
     carry = fresh_carry(pool)
     release_freed_memory()  # the host copies of the pool's scenarios
@@ -401,14 +429,19 @@ def setup_training(config: TrainConfig, train_path: str, print_fn: Callable[[str
         buffer_mib = total / 2**20
         print_fn(f"replay buffer: {algo_config.buffer_size:,} transitions x {total / algo_config.buffer_size:,.0f} B "
                  f"= {buffer_mib:,.0f} MiB ({loop.buffer_dtype} observations, each stored once)")
-        carry = carry.replace(buffer=fresh_replay())
+        if share.num_processes > 1:  # each process allocates only its devices' blocks
+            shardings = replay_shardings(carry_abstract.buffer, mesh)
+            carry = carry.replace(buffer=jax.jit(fresh_replay, out_shardings=shardings)())
+        else:
+            carry = carry.replace(buffer=fresh_replay())
     if mesh is not None:
         carry, pool = shard_carry(carry, pool, mesh)
-        print_fn(f"data-parallel over {mesh.size} devices ({num_envs // mesh.size} envs each)")
+        processes = f" of {share.num_processes} processes" if share.num_processes > 1 else ""
+        print_fn(f"data-parallel over {mesh.size} devices{processes} ({num_envs // mesh.size} envs each)")
     return TrainingSetup(env=env, learner=learner, carry=carry, pool=pool, stream=stream, chunk_fn=chunk_fn,
                          per_chunk=env_steps_per_chunk(config.algo, algo_config, chunk_steps(config),
                                                        config.agents_per_env), mesh=mesh,
-                         buffer_mib=buffer_mib)
+                         buffer_mib=buffer_mib, place=replicated_placer(mesh) if share.num_processes > 1 else None)
 
 
 class _Progress:
@@ -463,8 +496,11 @@ def train(config: TrainConfig, run_dir: str | Path, *, resume: bool = False, pro
     run_dir = Path(run_dir)
     if resume:
         load_run_config(run_dir)  # a one-line error for a folder that holds no run, before the lock creates it
+    if not distributed.is_primary():  # process 0 reports and holds the lock for the whole run
+        print_fn, progress = (lambda line: None), False
+    lock = FolderLock(run_dir, "training run") if distributed.is_primary() else contextlib.nullcontext()
     try:
-        with FolderLock(run_dir, "training run"):  # one writer per run directory
+        with lock:  # one writer per run directory
             return _train_locked(config, run_dir, resume=resume, progress=progress, print_fn=print_fn,
                                  stop_after_chunks=stop_after_chunks, resume_overrides=resume_overrides)
     except FolderBusyError as error:
@@ -482,15 +518,15 @@ def _train_locked(config: TrainConfig | None, run_dir: Path, *, resume: bool, pr
         if saved != config and config is not None:
             print_fn("resuming with the run directory's own configuration (config.json)")
         config = resumed_config(saved, resume_overrides)
-        if config != saved:
-            save_run_config(run_dir, config)
     elif (run_dir / CONFIG_FILE).exists():
         raise InputError(f"{run_dir}: already holds a training run; pass --resume to continue it or choose "
                          f"another --out")
+    distributed.barrier("run directory checked")  # by every process, before process 0 writes into it
     run_dir.mkdir(parents=True, exist_ok=True)
     loop = config.train
-    train_path, eval_path = resolve_data(config, print_fn)
-    if not resume:
+    # a synthetic split is generated once, into a cache other processes on the host may share
+    train_path, eval_path = distributed.primary_first(lambda: resolve_data(config, print_fn), "training data resolved")
+    if distributed.is_primary() and (not resume or config != saved):
         save_run_config(run_dir, config)
 
     store = CheckpointStore(run_dir / "checkpoints", keep=loop.keep_checkpoints)
@@ -522,7 +558,8 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
             carry, pool = shard_carry(carry, pool, setup.mesh)
         print_fn(f"resumed {run_dir} at {restored_step:,} env steps")
 
-    logger = RunLogger(run_dir)
+    primary = distributed.is_primary()
+    logger = RunLogger(run_dir, write=primary)
     env_steps = int(carry.env_steps)
     if resume:
         logger.truncate_after(env_steps)
@@ -545,13 +582,14 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
                                             f"once, losing the steps since the last checkpoint)")) as stop:
         try:
             while env_steps < loop.total_env_steps:
-                if wall_before + time.perf_counter() - start >= budget_s:
+                if math.isfinite(budget_s) and distributed.any_process(
+                        [wall_before + time.perf_counter() - start >= budget_s])[0]:
                     stopped = "max_wall_minutes"
                     break
                 tick = time.perf_counter()
                 carry, stats = chunk_fn(carry, pool)
                 scalars = _host_scalars(stats)  # blocks until the chunk is done
-                pool = refresh_pool(pool, stream, pool_refresh(config))
+                pool = refresh_pool(pool, stream, pool_refresh(config), place=setup.place)
                 env_steps = int(carry.env_steps)
                 elapsed = time.perf_counter() - tick
                 scalars.update({"sps": per_chunk / elapsed, "wall_s": wall_before + time.perf_counter() - start,
@@ -565,16 +603,18 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
                     print_fn(f"warning: {lost:,} truncated transitions in the replay buffer lost their last "
                              f"observation (truncated episodes average under {MIN_TRUNCATED_LENGTH} steps); their "
                              f"targets bootstrap from the next episode's first observation")
-                out_of_time = scalars["wall_s"] >= budget_s
-                if stop.requested:
+                # every process stops after the same chunk (a signal or the clock of one of them)
+                requested, out_of_time = distributed.any_process([stop.requested, scalars["wall_s"] >= budget_s])
+                if requested:
                     stopped = "interrupted"
                 elif out_of_time:
                     stopped = "max_wall_minutes"
-                last_chunk = env_steps >= loop.total_env_steps or stop.requested or out_of_time
+                last_chunk = env_steps >= loop.total_env_steps or requested or out_of_time
                 # evaluations and checkpoints free a lot at once: return it (and what the chunks left) to the system
                 if loop.eval_every and env_steps - last_eval >= loop.eval_every and not last_chunk:
                     release_freed_memory()
-                    evaluator.run(learner.policy_params(carry.learner), env_steps, scalars["wall_s"])
+                    evaluator.run(distributed.local_copy(learner.policy_params(carry.learner)), env_steps,
+                                  scalars["wall_s"])
                     last_eval = env_steps
                     release_freed_memory()
                 if env_steps - last_checkpoint >= loop.checkpoint_every or last_chunk:
@@ -602,14 +642,15 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
         print_fn(f"stopped at the wall-clock budget (train.max_wall_minutes={loop.max_wall_minutes:g}) after "
                  f"{env_steps:,} env steps; checkpoint saved in {store.directory / str(env_steps)}")
     if stopped == "interrupted":
-        print_fn(f"{stop.signal_name}: checkpoint saved at {env_steps:,} env steps in "
+        print_fn(f"{stop.signal_name or 'a stop request'}: checkpoint saved at {env_steps:,} env steps in "
                  f"{store.directory / str(env_steps)}; continue with: vmax-sim train --resume {run_dir}")
     final = None
     carry, pool = carry.replace(buffer=None), None  # done with (the last checkpoint holds the buffer): evaluate without
     release_freed_memory()
     if finished:
-        final = evaluator.run(learner.policy_params(carry.learner), env_steps, wall_s)
-        evaluator.plot(run_dir / "learning_curve.png", logger.rows)
+        final = evaluator.run(distributed.local_copy(learner.policy_params(carry.learner)), env_steps, wall_s)
+        if primary:
+            evaluator.plot(run_dir / "learning_curve.png", logger.rows)
     logger.close()
     rows = [row for row in logger.rows if "sps" in row]
     sps = float(np.median([row["sps"] for row in rows[1:]])) if len(rows) > 1 else math.nan
@@ -619,7 +660,8 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
                "stopped": stopped, "final_evaluation": final}
     if config.is_selfplay:
         summary["selfplay_evaluation"] = evaluator.selfplay_summary
-    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
+    if primary:
+        (run_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
     return TrainResult(run_dir=run_dir, env_steps=env_steps, wall_s=wall_s, env_steps_per_s=sps,
                        final_evaluation=final, summary=summary, stopped=stopped)
 
@@ -648,7 +690,7 @@ class _Evaluator:
         self.policy = _policy_of(config)
         self.env_config = components(config)[0].env_config
         self.eval_path = eval_path
-        self.log = RunLogger(run_dir, tensorboard=False, file_name="eval.csv")
+        self.log = RunLogger(run_dir, tensorboard=False, file_name="eval.csv", write=distributed.is_primary())
         self.print_fn = print_fn
         self.selfplay_summary: dict | None = None  # the last self-play evaluation (self-play runs)
 
