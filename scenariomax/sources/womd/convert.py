@@ -142,24 +142,33 @@ def map_polylines(message) -> tuple[list[MapPolyline], list[LaneLinks]]:
 
 
 # --- traffic lights ------------------------------------------------------------------------------
+_LANE_STATE_GETTER = operator.attrgetter("lane", "state", "stop_point.x", "stop_point.y", "stop_point.z")
+
+
 def traffic_light_arrays(message, start: int, num_timesteps: int) -> dict[str, np.ndarray]:
     """(L, T) light arrays for one window, one row per controlled lane (sorted by lane id)."""
     steps = message.dynamic_map_states[start:start + num_timesteps]
-    lanes = sorted({int(s.lane) for step in steps for s in step.lane_states})
-    row_of = {lane: row for row, lane in enumerate(lanes)}
+    # Every lane state read in one pass (attrgetter), then placed with numpy.
+    step_of = [step for step, dynamic in enumerate(steps) for _ in range(len(dynamic.lane_states))]
+    read = [values for dynamic in steps for values in map(_LANE_STATE_GETTER, dynamic.lane_states)]
+    lanes = sorted({values[0] for values in read})
     shape = (len(lanes), num_timesteps)
     state, lane_id = np.zeros(shape, np.int64), np.full(shape, -1, np.int64)
     valid = np.zeros(shape, bool)
     xyz = np.full((3,) + shape, -1.0, np.float32)
-    known_states = set(sch.load_schema().enums["traffic_light_state"])
-    for step, dynamic in enumerate(steps):
-        for lane_state in dynamic.lane_states:
-            row = row_of[int(lane_state.lane)]
-            valid[row, step] = True
-            state[row, step] = lane_state.state if lane_state.state in known_states else sch.TL_UNKNOWN
-            lane_id[row, step] = lane_state.lane
-            point = lane_state.stop_point
-            xyz[:, row, step] = (point.x, point.y, point.z)
+    if read:
+        lane = np.array([values[0] for values in read], np.int64)  # (k,)
+        code = np.array([values[1] for values in read], np.int64)
+        point = np.array([values[2:] for values in read], np.float64)  # (k, 3)
+        row, step = np.searchsorted(lanes, lane), np.array(step_of, np.int64)
+        # A lane reported twice in one step: its last report counts (as when written one by one).
+        last = len(read) - 1 - np.unique((row * num_timesteps + step)[::-1], return_index=True)[1]
+        row, step, lane, code, point = row[last], step[last], lane[last], code[last], point[last]
+        known = np.isin(code, list(sch.load_schema().enums["traffic_light_state"]))
+        valid[row, step] = True
+        state[row, step] = np.where(known, code, sch.TL_UNKNOWN)
+        lane_id[row, step] = lane
+        xyz[:, row, step] = point.T
     return dict(tl_state=state, tl_valid=valid, tl_lane_id=lane_id, tl_x=xyz[0], tl_y=xyz[1], tl_z=xyz[2])
 
 

@@ -45,3 +45,21 @@ def test_point_table_is_the_regular_parse():
 def test_bytes_that_are_no_message_fail_with_one_line(table):
     with pytest.raises(ValueError, match="not a WOMD Scenario message"):
         table([b"\x09\x01"])  # a double cut short
+
+
+def test_light_arrays_keep_the_last_report_of_a_lane_in_a_step():
+    from scenariomax import schema as sch
+    from scenariomax.sources.womd.convert import traffic_light_arrays
+
+    message = proto.ScenarioProto()
+    for step in range(3):
+        dynamic = message.dynamic_map_states.add()
+        for lane, state in ((5, 3), (2, 99), (5, 4)):  # lane 5 twice; 99 is no light state
+            report = dynamic.lane_states.add(lane=lane, state=state)
+            report.stop_point.x, report.stop_point.y, report.stop_point.z = step + lane, 1.5, -2.0
+    message.dynamic_map_states.add()  # a step without reports
+    arrays = traffic_light_arrays(message, 0, 5)
+    np.testing.assert_array_equal(arrays["tl_state"], [[sch.TL_UNKNOWN] * 3 + [0, 0], [4, 4, 4, 0, 0]])
+    np.testing.assert_array_equal(arrays["tl_valid"], [[True] * 3 + [False] * 2] * 2)
+    np.testing.assert_array_equal(arrays["tl_lane_id"], [[2, 2, 2, -1, -1], [5, 5, 5, -1, -1]])
+    np.testing.assert_array_equal(arrays["tl_x"][1], [5, 6, 7, -1, -1])
