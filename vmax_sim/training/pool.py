@@ -2,7 +2,7 @@
 
 Scenario n of the (seeded, shuffled, repeated) stream always lands in pool slot n % pool_size, so
 the pool after any number of chunks is a pure function of how many scenarios were consumed: a
-resumed run rebuilds it exactly by skipping (decoding only) to that point. A background thread
+resumed run rebuilds it exactly by skipping (reading nothing) to that point. A background thread
 converts scenarios (map index included) ahead of the learner; `take` blocks only if it is behind,
 and the time it waited is reported so a slow loader is visible in the logs.
 
