@@ -2,11 +2,14 @@
 
 - records read + decoded to Scenario per second at 30000 roadgraph points (goal >= 300/s/core);
 - synthetic scenarios generated (+ enriched) and written per second;
-- conversion of each real sample (scenarios/s, peak RSS of the worker);
+- conversion of each real sample (scenarios/s, peak RSS of the worker): read, sanity repairs, enrichment
+  (or not), budget fit, validation and encoding, as a pipeline worker does them; the median of several passes,
+  per second of process CPU time (robust on a shared machine) and of wall time;
 - build-sdc-paths (enrichment) scenarios/s on the real WOMD tf.Example.
 
-Usage: python benchmarks/io_and_conversion.py [--json]
-Numbers go to docs/benchmarks.md with the machine they were taken on.
+Usage: python benchmarks/io_and_conversion.py [--json] [--sources-only]
+Numbers go to docs/benchmarks.md with the machine they were taken on. To measure another tree (e.g. the
+commit before a change), put its root first: PYTHONPATH=/path/to/old/tree python benchmarks/...
 """
 
 from __future__ import annotations
@@ -66,9 +69,16 @@ def bench_synthetic(num: int = 40) -> dict:
     }
 
 
-def bench_source(dataset: str, src: Path, repeats: int = 5) -> dict:
+def _median(values: list[float]) -> float:
+    ordered = sorted(values)
+    return ordered[len(ordered) // 2]
+
+
+def bench_source(dataset: str, src: Path, min_seconds: float = 6.0, min_passes: int = 3) -> dict:
+    """Scenarios/s of one real sample through a pipeline worker's steps: medians over passes (each pass reads
+    every file once), per second of CPU time and of wall time."""
     from scenariomax.enrich.transform import make_transform
-    from scenariomax.pipeline import prepare_scenario
+    from scenariomax.pipeline import SANITIZED_SOURCES, prepare_scenario, sanitize_scenario
     from scenariomax.schema import Sizes
     from scenariomax.sources.base import Failure
     from scenariomax.sources.registry import make_source
@@ -78,16 +88,28 @@ def bench_source(dataset: str, src: Path, repeats: int = 5) -> dict:
     sizes = Sizes()
     source = make_source(dataset, src=str(src), sizes=sizes)
     transform, _ = make_transform(True)
+
+    def one_pass(fn) -> int:
+        count = 0
+        for unit in source.list_units():
+            for item in source.read_unit(unit):
+                if not isinstance(item, Failure):
+                    item = sanitize_scenario(item) if source.name in SANITIZED_SOURCES else item
+                    prepare_scenario(item, sizes, fn)
+                    count += 1
+        return count
+
     results = {}
     for label, fn in (("convert", None), ("convert+enrich", transform)):
-        count, start = 0, time.perf_counter()
-        for _ in range(repeats):
-            for unit in source.list_units():
-                for item in source.read_unit(unit):
-                    if not isinstance(item, Failure):
-                        prepare_scenario(item, sizes, fn)
-                        count += 1
-        results[f"{label}_per_s"] = _rate(count, time.perf_counter() - start)
+        one_pass(fn)  # warm-up: imports, caches
+        cpu, wall, stop = [], [], time.perf_counter() + min_seconds
+        while len(cpu) < min_passes or time.perf_counter() < stop:
+            cpu_start, wall_start = time.process_time(), time.perf_counter()
+            count = one_pass(fn)
+            cpu.append(_rate(count, time.process_time() - cpu_start))
+            wall.append(_rate(count, time.perf_counter() - wall_start))
+        results[f"{label}_per_cpu_s"] = _median(cpu)
+        results[f"{label}_per_s"] = _median(wall)
     results["peak_rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return results
 
@@ -95,24 +117,29 @@ def bench_source(dataset: str, src: Path, repeats: int = 5) -> dict:
 def main() -> None:
     report = {
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, {platform.system()}",
-        "read_decode": bench_read_decode(),
-        "synthetic": bench_synthetic(),
+        "load_average": os.getloadavg(),
         "sources": {
             "womd_scenario": bench_source("womd", REALDATA / "womd" / "motion_data_one_scenario.tfrecord"),
             "womd_tf_example": bench_source("womd", REALDATA / "womd" / "motion_data_one_example.tfrecord"),
+            "gpudrive_json": bench_source("gpudrive", REALDATA / "gpudrive"),
             "av2": bench_source("av2", REALDATA / "av2"),
             "scenarionet": bench_source("scenarionet", REALDATA / "scenarionet"),
         },
     }
+    if "--sources-only" not in sys.argv:
+        report["read_decode"] = bench_read_decode()
+        report["synthetic"] = bench_synthetic()
+    report["load_average_after"] = os.getloadavg()
     if "--json" in sys.argv:
         print(json.dumps(report, indent=1))
         return
-    print(f"machine: {report['machine']}")
-    rd = report["read_decode"]
-    print(f"read+decode: {rd['records_per_s']:.0f} records/s (30000 roadgraph points, {rd['records']} records)")
-    syn = report["synthetic"]
-    print("synthetic: generate {generate_per_s:.1f}/s, enrich {enrich_per_s:.1f}/s, encode {encode_per_s:.1f}/s, "
-          "end to end {end_to_end_per_s:.1f}/s".format(**syn))
+    print(f"machine: {report['machine']}; load average {report['load_average']} -> {report['load_average_after']}")
+    if "read_decode" in report:
+        rd = report["read_decode"]
+        print(f"read+decode: {rd['records_per_s']:.0f} records/s (30000 roadgraph points, {rd['records']} records)")
+        syn = report["synthetic"]
+        print("synthetic: generate {generate_per_s:.1f}/s, enrich {enrich_per_s:.1f}/s, encode {encode_per_s:.1f}/s, "
+              "end to end {end_to_end_per_s:.1f}/s".format(**syn))
     for name, values in report["sources"].items():
         print(f"{name}: " + ", ".join(f"{k} {v:.1f}" if isinstance(v, float) else f"{k} {v}"
                                       for k, v in values.items()))
