@@ -97,16 +97,16 @@ def _check_options(fn):
                              "(as `scenariomax validate --deep`; ~2 ms a record).")(fn)
 
 
-def _check_data(specs, deep: bool, skip: bool, quiet: bool) -> None:
+def _check_data(specs, deep: bool, skip: bool, quiet: bool, share: tuple[int, int] = (0, 1)) -> None:
     """The shards named by `specs` checked up front (framing and CRC; `deep`: plausibility); InputError on the
-    first bad record, naming its file and index."""
+    first bad record, naming its file and index. share: (process index, process count) of a multi-process run."""
     if skip:
         return
     from vmax_sim.data.precheck import check_shards, shard_paths
 
     paths = shard_paths(specs)
     if paths:
-        check_shards(paths, deep=deep, progress=not quiet)
+        check_shards(paths, deep=deep, progress=not quiet, share=share)
 
 
 @main.command(context_settings={"ignore_unknown_options": False})
@@ -141,7 +141,7 @@ def train(preset, data, eval_data, out, resume_dir, quiet, coordinator, num_proc
     """Train a policy. OVERRIDES are section.field=value, e.g. algo.learning_rate=3e-4 train.total_env_steps=1e5."""
     import time as _time
 
-    from vmax_sim.training.distributed import distributed_settings, initialize, is_primary
+    from vmax_sim.training.distributed import distributed_settings, initialize, is_primary, process_share
 
     try:  # before anything touches JAX
         settings = distributed_settings(coordinator, num_processes, process_id, detect)
@@ -154,6 +154,7 @@ def train(preset, data, eval_data, out, resume_dir, quiet, coordinator, num_proc
     primary = settings is None or is_primary()
     echo = click.echo if primary else (lambda *args, **kwargs: None)  # process 0 reports
     quiet = quiet or not primary
+    share = (0, 1) if settings is None else process_share()  # each process checks its share of the shard files
 
     from vmax_sim.training import apply_overrides, preset_config
     from vmax_sim.training import train as run_training
@@ -165,14 +166,14 @@ def train(preset, data, eval_data, out, resume_dir, quiet, coordinator, num_proc
             from vmax_sim.training.run import load_run_config
 
             resumed = load_run_config(resume_dir).data
-            _check_data([resumed.train, resumed.eval], deep, skip_checks, quiet)
+            _check_data([resumed.train, resumed.eval], deep, skip_checks, quiet, share)
             result = run_training(None, resume_dir, resume=True, progress=not quiet, print_fn=echo,
                                   resume_overrides=overrides)
         else:
             config = preset_config(preset)
             extra = [f"data.train={data}"] * bool(data) + [f"data.eval={eval_data}"] * bool(eval_data)
             config = apply_overrides(config, extra + list(overrides))
-            _check_data([config.data.train, config.data.eval], deep, skip_checks, quiet)
+            _check_data([config.data.train, config.data.eval], deep, skip_checks, quiet, share)
             run_dir = out or f"runs/{preset}-{_time.strftime('%Y%m%d-%H%M%S')}"
             echo(f"run directory: {run_dir}")
             result = run_training(config, run_dir, progress=not quiet, print_fn=echo)

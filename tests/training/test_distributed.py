@@ -49,6 +49,19 @@ def test_incomplete_or_wrong_settings_are_one_line_errors(args, message):
         distributed_settings(*args, environ={})
 
 
+def test_processes_split_the_shard_check_by_file(tmp_path):
+    import scenariomax
+    from tests.conftest import straight_road_scenario
+    from vmax_sim.data.precheck import check_shards
+
+    sizes = scenariomax.Sizes(num_objects=4, num_roadgraph=400)
+    for name, count in (("a", 2), ("b", 3)):
+        scenarios = (scenariomax.fit_to_budget(straight_road_scenario(f"{name}{i}"), sizes) for i in range(count))
+        scenariomax.write_shards(scenarios, tmp_path / name, sizes)
+    paths = [str(tmp_path / "a"), str(tmp_path / "b")]
+    assert [check_shards(paths, progress=False, share=(p, 2)) for p in range(2)] == [2, 3]
+
+
 # --------------------------------------------------------------------------------------------- stream shares
 
 

@@ -60,9 +60,11 @@ def _check_file(file: Path, deep: bool) -> int:
     return index
 
 
-def check_shards(paths: Sequence[str], deep: bool = False, progress: bool = True) -> int:
-    """Checks every record under `paths` (see the module docstring); returns how many there are."""
-    files = [file for path in paths for file in resolve_files(path)]
+def check_shards(paths: Sequence[str], deep: bool = False, progress: bool = True,
+                 share: tuple[int, int] = (0, 1)) -> int:
+    """Checks every record under `paths` (see the module docstring); returns how many there are.
+    share=(index, count): only files index, index + count, ... (the processes of one training run split the check)."""
+    files = [file for path in paths for file in resolve_files(path)][share[0]::share[1]]
     what = "checking shards (framing, CRC" + (", plausibility)" if deep else ")")
     total = 0
     with Progress(what, len(files), "files", enabled=progress and len(files) > 1) as shown:

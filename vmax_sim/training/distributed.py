@@ -87,6 +87,11 @@ def num_processes() -> int:
     return jax.process_count()
 
 
+def process_share() -> tuple[int, int]:
+    """(this process's index, the process count)."""
+    return jax.process_index(), jax.process_count()
+
+
 def is_primary() -> bool:
     """Process 0 writes the run directory (config, logs, summary, pictures); every process writes checkpoints."""
     return jax.process_index() == 0
