@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import csv
 import os
+import signal
 import socket
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import jax
@@ -191,10 +193,10 @@ def _launch(args: list[str], env: dict, processes: int = 1) -> list[subprocess.P
                              text=True) for index in range(processes)]
 
 
-def _finish(launched: list[subprocess.Popen]) -> list[str]:
+def _finish(launched: list[subprocess.Popen], returncode: int = 0) -> list[str]:
     outputs = [process.communicate(timeout=600) for process in launched]
     for process, (out, err) in zip(launched, outputs):
-        assert process.returncode == 0, out + err
+        assert process.returncode == returncode, out + err
     return [out for out, _ in outputs]
 
 
@@ -205,30 +207,36 @@ def _assert_same_rows(left: list[dict], right: list[dict]) -> None:
             np.testing.assert_allclose(float(a[key]), float(b[key]), rtol=1e-5, atol=1e-6, err_msg=key)
 
 
-@pytest.mark.slow  # three launches of tiny SAC runs: ~3 min on 2 quiet cores (the two processes share them)
+@pytest.mark.slow  # three launches of tiny SAC runs: ~3 min of 2 quiet cores' time (5.5 min beside other jobs)
 def test_two_processes_train_and_resume_to_the_curve_of_one_process_with_two_devices(synthetic_shards, tmp_path):
     """One process with two CPU devices vs two processes with one each (same global batch, same mesh): every
     process converts half of the scenarios and the stream exchange rebuilds the same pool, so the curves match.
-    The two-process run stops at 40 env steps and is resumed to 60 (the replay restored from per-block files)."""
+    A SIGINT to process 1 alone stops both after the same chunk with a checkpoint; `--resume` finishes the run
+    (the replay restored from per-block files)."""
     # the resumed processes reuse the first ones' compilations
     cache = {"JAX_COMPILATION_CACHE_DIR": str(tmp_path / "jax-cache"),
              "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0"}
     env = {**os.environ, "JAX_PLATFORMS": "cpu", **cache}
     env.pop("XLA_FLAGS", None)
-    args = _train_args(synthetic_shards)
+    args = [*_train_args(synthetic_shards), "train.total_env_steps=80"]
     one, two = tmp_path / "one-process", tmp_path / "two-processes"
-    reference = _launch([*args, "--out", str(one), "train.total_env_steps=60"],
-                        {**env, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"})
-    first = _launch([*args, "--out", str(two), "train.total_env_steps=40"], env, processes=2)
-    outputs = _finish(first)
+    reference = _launch([*args, "--out", str(one)], {**env, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"})
+    first = _launch([*args, "--out", str(two)], env, processes=2)
+    deadline = time.time() + 600
+    while time.time() < deadline and not (two / "checkpoints" / "20").exists() and first[1].poll() is None:
+        time.sleep(0.2)
+    first[1].send_signal(signal.SIGINT)  # the stop loop is running once the first checkpoint is there
+    outputs = _finish(first, returncode=130)
     assert "data-parallel over 2 devices of 2 processes (2 envs each)" in outputs[0]
-    assert "trained 40 env steps" in outputs[0] and "trained" not in outputs[1]  # process 1 reports nothing
-    replay = sorted(p.name for p in (two / "checkpoints" / "40" / "replay").iterdir() if p.suffix == ".npy")
+    assert "a stop request: checkpoint saved" in outputs[0] and "trained" not in outputs[1]  # process 0 reports
+    stopped = int(float(_rows(two / "metrics.csv")[-1]["env_steps"]))
+    assert 20 < stopped < 80 and (two / "checkpoints" / str(stopped)).exists()  # both stopped after one chunk
+    replay = sorted(p.name for p in (two / "checkpoints" / str(stopped) / "replay").iterdir())
     assert "0.b0.npy" in replay and "0.b1.npy" in replay  # each process wrote its own block
-    outputs = _finish(_launch(["train", "--resume", str(two), "--quiet", "train.total_env_steps=60"], env, 2))
-    assert f"resumed {two} at 40 env steps" in outputs[0] and "trained 60 env steps" in outputs[0]
+    outputs = _finish(_launch(["train", "--resume", str(two), "--quiet"], env, processes=2))
+    assert f"resumed {two} at {stopped} env steps" in outputs[0] and "trained 80 env steps" in outputs[0]
     _finish(reference)
-    assert [float(r["env_steps"]) for r in _rows(two / "metrics.csv")] == [20.0, 40.0, 60.0]
+    assert [float(r["env_steps"]) for r in _rows(two / "metrics.csv")] == [20.0, 40.0, 60.0, 80.0]
     assert float(_rows(two / "metrics.csv")[0]["learner/critic_loss"]) != 0.0  # the learner learnt from chunk one
     _assert_same_rows(_rows(one / "metrics.csv"), _rows(two / "metrics.csv"))
-    _assert_same_rows(_rows(one / "eval.csv")[-1:], _rows(two / "eval.csv")[-1:])
+    _assert_same_rows(_rows(one / "eval.csv"), _rows(two / "eval.csv"))
