@@ -52,7 +52,9 @@ def test_idm_traffic_is_a_training_option_that_self_play_refuses():
 
     config = apply_overrides(preset_config("bc-mlp"), ["train.traffic=idm", "train.traffic_agents=4"])
     env, _ = components(config)
-    assert (env.traffic, env.traffic_agents) == ("idm", 4)
+    from vmax_sim.policies.traffic import idm_traffic
+
+    assert (env.traffic, env.traffic_agents) == (idm_traffic, 4)
     assert train_data_config(config, "shards", 0).include_agent_paths  # the agents' own routes are loaded
     assert not train_data_config(preset_config("bc-mlp"), "shards", 0).include_agent_paths
     with pytest.raises(ValueError, match="choose one"):

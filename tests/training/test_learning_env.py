@@ -22,6 +22,8 @@ from tests.integration_sim.conftest import (
 from vmax_sim.data import scenarios_to_batch
 from vmax_sim.env import EnvConfig
 from vmax_sim.env.learning import LearningEnv
+from vmax_sim.policies.traffic import idm_traffic
+from vmax_sim.training.run import TRAFFIC_DRIVERS
 
 ENV = LearningEnv(EnvConfig(max_num_objects=8))
 
@@ -137,7 +139,7 @@ def follower_scenario():
 @pytest.mark.slow  # ~100 s on 2 cores (two env compilations): the default suite stays under 10 minutes
 @pytest.mark.parametrize("traffic", ["log", "idm"])
 def test_idm_traffic_brakes_for_a_braking_learner_that_log_traffic_rear_ends(traffic):
-    env = LearningEnv(EnvConfig(max_num_objects=8), traffic=traffic)
+    env = LearningEnv(EnvConfig(max_num_objects=8), traffic=TRAFFIC_DRIVERS[traffic])
     pool = scenarios_to_batch([follower_scenario()], small_data_config("", include_agent_paths=True))
 
     def brake_to_a_stop(state):  # straight on, braking at up to 6 m/s^2 until it stands (the model would reverse)
@@ -168,6 +170,6 @@ def test_idm_traffic_brakes_for_a_braking_learner_that_log_traffic_rear_ends(tra
 
 
 def test_idm_traffic_needs_the_agents_paths():
-    env = LearningEnv(EnvConfig(max_num_objects=8), traffic="idm")
-    with pytest.raises(ValueError, match="IDM traffic .* needs the agents' paths"):
+    env = LearningEnv(EnvConfig(max_num_objects=8), traffic=idm_traffic)
+    with pytest.raises(ValueError, match=r"traffic while training \(train.traffic\) needs the agents' paths"):
         env.reset(pool(), 1, jax.random.PRNGKey(0))

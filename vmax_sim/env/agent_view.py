@@ -1,18 +1,28 @@
 """An agent's view of a scene: the state with the SDC flag moved to the agent's slot and the agent's own path
 (`SimulatorState.agent_paths`) as its only route, so every SDC-centred function (observation, metrics, reward,
-the planners) serves any agent unchanged; and the choice of which agents to drive.
+the planners) serves any agent unchanged; the choice of which agents to drive; and their actions from a driver
+(`AgentFn`, e.g. IDM in `vmax_sim.policies.traffic`) vmapped over the chosen slots (static count, no Python loop)
+and scattered into one `Action`.
 
-Used by reactive evaluation (rule or learned agents around the evaluated SDC) and by self-play training
-(`vmax_sim.env.selfplay`). Everything works on one unbatched state and is jittable.
+Used by reactive evaluation (rule or learned agents around the evaluated SDC), by self-play training
+(`vmax_sim.env.selfplay`) and by IDM traffic while training (`LearningEnv(traffic=...)`). Everything works on
+one unbatched state and is jittable.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import jax
 import jax.numpy as jnp
 
-from vmax_sim.datatypes import RoadgraphPoints, SimulatorState
+from vmax_sim.datatypes import Action, RoadgraphPoints, SimulatorState
 from vmax_sim.env.metrics_adapter import sdc_index
+
+MAX_STOP_SIGN_POINTS = 64  # stop-sign points handed to the agents' views (the nearest the SDC)
+
+# (params, agent view, key) -> the agent's action (action_dim,) in the env's convention, and its validity ()
+AgentFn = Callable[[object, SimulatorState, jax.Array], tuple[jax.Array, jax.Array]]
 
 
 def check_agent_paths(state: SimulatorState, needed_by: str = "reactive evaluation") -> None:
@@ -67,3 +77,35 @@ def with_sdc_route(state: SimulatorState) -> SimulatorState:
     updated = {name: row(getattr(paths, name), getattr(agents, name)) for name in names}
     on_route = agents.on_route.at[sdc].set(has_route | agents.on_route[sdc])
     return state.replace(agent_paths=agents.replace(**updated, on_route=on_route))
+
+
+def stop_sign_points(state: SimulatorState, max_points: int = MAX_STOP_SIGN_POINTS) -> RoadgraphPoints:
+    """The roadgraph's stop-sign points (nearest the SDC first, at most max_points), as a small
+    RoadgraphPoints: the only part of `roadgraph_points` the planners read (map queries go through the
+    map index). Handing it to the agents' views keeps K agents from each scanning the whole roadgraph
+    every step. -> RoadgraphPoints (max_points,)."""
+    from scenariomax.schema import RG_STOP_SIGN
+
+    rg = state.roadgraph_points
+    sdc = sdc_index(state)
+    t = state.timestep
+    centre = jnp.stack([state.log_trajectory.x[sdc, t], state.log_trajectory.y[sdc, t]])
+    is_sign = rg.valid & (rg.types == RG_STOP_SIGN)
+    distance = jnp.hypot(rg.x - centre[0], rg.y - centre[1])
+    k = min(max_points, rg.x.shape[-1])
+    _, index = jax.lax.top_k(-jnp.where(is_sign, distance, jnp.inf), k)
+    kept = jax.tree.map(lambda a: a[index], rg)
+    return kept.replace(valid=is_sign[index])
+
+
+def agents_action(state: SimulatorState, slots: jax.Array, slot_valid: jax.Array, agent_fn: AgentFn, params,
+                  key: jax.Array, action_dim: int, roadgraph: RoadgraphPoints | None = None) -> Action:
+    """Actions of the agents in `slots` (K,) (where slot_valid) from `agent_fn` on their views (`agent_view`,
+    with `roadgraph` in them when given); every other row is zero and invalid. -> Action (N, action_dim)."""
+    num = state.num_objects
+    keys = jax.random.split(key, slots.shape[0])
+    data, valid = jax.vmap(lambda slot, k: agent_fn(params, agent_view(state, slot, roadgraph), k))(slots, keys)
+    target = jnp.where(slot_valid, slots, num)  # out of range: dropped by the scatter
+    full = jnp.zeros((num, action_dim), jnp.float32).at[target].set(data.astype(jnp.float32), mode="drop")
+    full_valid = jnp.zeros((num, 1), bool).at[target, 0].set(valid & slot_valid, mode="drop")
+    return Action(data=full, valid=full_valid)

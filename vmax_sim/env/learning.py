@@ -1,8 +1,8 @@
 """`LearningEnv`: the one place a training loop gets reset / step / observe / reward, over a batch.
 
 The SDC is driven by the policy (actions in [-1, 1], mapped onto the dynamics' bounds). Every other
-object replays the log, or (traffic="idm") up to `traffic_agents` controllable agents nearest the SDC
-follow their own paths with IDM, never ahead of their logged position, so traffic reacts to a learner
+object replays the log, or (`traffic`, e.g. `vmax_sim.policies.traffic.idm_traffic`) up to `traffic_agents`
+controllable agents nearest the SDC follow their own paths with that driver, so traffic reacts to a learner
 that drives differently from the logged SDC (a log-replayed follower drives into a learner that brakes).
 Each step computes the metrics once and derives from them the reward, the
 termination (collision / off-road / red light, as `EnvConfig.terminate_on`), the truncation (episode
@@ -18,15 +18,18 @@ swap fresh scenarios into it between jitted chunks.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
 from flax import struct
 
 from vmax_sim.datatypes import RoadgraphPoints, SimulatorState, sdc_action
+from vmax_sim.env.agent_view import AgentFn, agents_action, check_agent_paths, choose_agents, stop_sign_points
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.environment import Environment
 from vmax_sim.env.metrics_adapter import reference_arcs, sdc_index, sdc_observation, step_inputs
+from vmax_sim.env.multi_agent import sdc_and_agents_action
 from vmax_sim.metrics import MetricsConfig, SharedQueries, shared_queries, step_metrics
 from vmax_sim.observation import Observation, ObservationConfig
 from vmax_sim.rewards import RewardConfig, check_reward_config, compute_reward
@@ -36,12 +39,11 @@ from vmax_sim.rewards import RewardConfig, check_reward_config, compute_reward
 TERMINATION_METRICS = {"collision": "overlap", "offroad": "offroad", "red_light": "red_light"}
 # Per-episode indicators reported when an episode ends (any step of the episode).
 EPISODE_FLAGS = ("overlap", "offroad", "red_light", "off_route", "wrong_way", "at_fault_collision")
-TRAFFIC_CHOICES = ("log", "idm")  # who drives the objects other than the SDC while training
 
 
 @struct.dataclass
 class TrafficAgents:
-    """The agents IDM drives in one episode (traffic="idm"), chosen when it starts."""
+    """The agents the traffic driver drives in one episode, chosen when it starts."""
 
     slots: jax.Array  # (K,) int32, object slots, nearest the SDC first
     valid: jax.Array  # (K,) bool, a slot holds a driven agent
@@ -60,7 +62,7 @@ class LearningState:
     episode_flags: dict  # name -> (B,) bool, EPISODE_FLAGS seen so far in the episode
     next_scenario: jax.Array  # () int32, pool index of the next episode to start
     key: jax.Array  # PRNG key for observation noise
-    traffic: TrafficAgents | None = None  # (B, ...) the IDM-driven agents (traffic="idm"), else None
+    traffic: TrafficAgents | None = None  # (B, ...) the driven agents (LearningEnv.traffic given), else None
 
 
 @struct.dataclass
@@ -99,23 +101,22 @@ class LearningEnv:
     # within them stops there): at 10 Hz one action barely changes the future, so a critic learns little
     # about it (docs/learning.md)
     action_repeat: int = 1
-    # who drives the other objects: "log" (they replay it) or "idm" (see the module docstring)
-    traffic: str = "log"
-    traffic_agents: int = 8  # traffic="idm": at most this many agents are driven, the rest replay the log
+    # who drives the other objects: None (they replay the log) or a factory (core Environment) -> AgentFn of the
+    # agents' driver (`vmax_sim.policies.traffic.idm_traffic`); the env floor cannot import the planners
+    traffic: Callable[[Environment], AgentFn] | None = None
+    traffic_agents: int = 8  # with traffic: at most this many agents are driven, the rest replay the log
 
     def __post_init__(self) -> None:
         if self.env_config.controlled != "sdc":
             raise ValueError("LearningEnv drives the SDC only: EnvConfig.controlled must be 'sdc'")
         check_learning_settings(self.env_config, self.reward_config, self.action_repeat)
-        check_traffic(self.traffic, self.traffic_agents)
+        if self.traffic_agents < 1:
+            raise ValueError(f"traffic_agents must be at least 1, got {self.traffic_agents}")
         config = dataclasses.replace(self.env_config, normalize_actions=True)  # policies act in [-1, 1]
         object.__setattr__(self, "env_config", config)
         object.__setattr__(self, "core", Environment(config))
-        if self.traffic == "idm":
-            from vmax_sim.policies.traffic import idm_driver  # the planners import the env: imported late
-
-            # the reactive evaluation's IDM agents: their logged pace, never ahead of their logged position
-            object.__setattr__(self, "_agent_fn", idm_driver(self.core, speed="log", follow_log=True))
+        if self.traffic is not None:
+            object.__setattr__(self, "_agent_fn", self.traffic(self.core))
 
     @property
     def action_dim(self) -> int:
@@ -138,12 +139,9 @@ class LearningEnv:
         return sim, arcs, shared, metrics, sdc_observation(sim, shared, self.obs_config), traffic
 
     def _choose_traffic(self, sim: SimulatorState) -> tuple[SimulatorState, TrafficAgents | None]:
-        """traffic="idm": the agents to drive this episode, marked controlled (the dynamics move them)."""
-        if self.traffic != "idm":
+        """With traffic: the agents to drive this episode, marked controlled (the dynamics move them)."""
+        if self.traffic is None:
             return sim, None
-        from vmax_sim.env.agent_view import choose_agents
-        from vmax_sim.policies.traffic import stop_sign_points
-
         slots, valid = choose_agents(sim, self.traffic_agents, self.env_config.first_policy_timestep)
         driven = jnp.zeros(sim.num_objects, bool).at[jnp.where(valid, slots, sim.num_objects)].set(True, mode="drop")
         meta = sim.object_metadata
@@ -152,13 +150,10 @@ class LearningEnv:
         return sim, TrafficAgents(slots=slots, valid=valid, signs=stop_sign_points(sim))
 
     def _full_action(self, sim: SimulatorState, action: jax.Array, traffic: TrafficAgents | None, key: jax.Array):
-        """The SDC's action (A,) in its slot, with the IDM agents' actions in theirs. -> Action (N, A)"""
+        """The SDC's action (A,) in its slot, with the traffic agents' actions in theirs. -> Action (N, A)"""
         full = sdc_action(sim, action)
         if traffic is None:
             return full
-        from vmax_sim.env.multi_agent import sdc_and_agents_action
-        from vmax_sim.policies.traffic import agents_action
-
         others = agents_action(sim, traffic.slots, traffic.valid, self._agent_fn, None, key, self.action_dim,
                                traffic.signs)
         return sdc_and_agents_action(sim, full, others)
@@ -174,7 +169,7 @@ class LearningEnv:
 
     def _move(self, sim: SimulatorState, arcs: jax.Array, action: jax.Array, traffic: TrafficAgents | None,
               key: jax.Array):
-        """One simulator step of one scene with the SDC's action (A,) (and the IDM agents'): state, queries,
+        """One simulator step of one scene with the SDC's action (A,) (and the traffic agents'): state, queries,
         metrics, termination, truncation."""
         sim = self.core.step(sim, self._full_action(sim, action, traffic, key))
         shared, metrics = self._measure(sim, arcs)
@@ -224,10 +219,8 @@ class LearningEnv:
 
     def reset(self, pool: SimulatorState, batch_size: int, key: jax.Array) -> LearningState:
         """Starts `batch_size` episodes on pool scenarios 0..B-1 (cycled when the pool is smaller)."""
-        if self.traffic == "idm":
-            from vmax_sim.env.agent_view import check_agent_paths
-
-            check_agent_paths(pool, "IDM traffic (traffic='idm')")
+        if self.traffic is not None:
+            check_agent_paths(pool, "traffic while training (train.traffic)")
         pool_size = pool.timestep.shape[0]
         indices = jnp.arange(batch_size) % pool_size
         sim, arcs, shared, metrics, observation, traffic = jax.vmap(self._start)(_take(pool, indices))
@@ -302,14 +295,6 @@ def check_learning_settings(env_config: EnvConfig, reward_config: RewardConfig, 
     check_reward_config(reward_config)
     if action_repeat < 1:
         raise ValueError(f"action_repeat must be at least 1, got {action_repeat}")
-
-
-def check_traffic(traffic: str, traffic_agents: int, prefix: str = "") -> None:
-    """One-line ValueError for a traffic setting a learning env cannot use (prefix: the settings' section)."""
-    if traffic not in TRAFFIC_CHOICES:
-        raise ValueError(f"{prefix}traffic must be one of {', '.join(TRAFFIC_CHOICES)}, got {traffic!r}")
-    if traffic_agents < 1:
-        raise ValueError(f"{prefix}traffic_agents must be at least 1, got {traffic_agents}")
 
 
 def _has_noise(config: ObservationConfig) -> bool:

@@ -1,9 +1,9 @@
 """Reactive agents in evaluation: who drives the controllable objects (IDM, PDM, the evaluated or another
 trained policy) and the collisions among them.
 
-How an agent is driven (its view of the state, `agents_action`) is `vmax_sim.policies.traffic`, shared with
-IDM traffic while training. Everything works on one unbatched state and is jittable; the mode rollout vmaps
-it over scenarios.
+How an agent is driven (its view of the state, `agents_action`) is `vmax_sim.env.agent_view`, the IDM driver
+`vmax_sim.policies.traffic`: both shared with IDM traffic while training. Everything works on one unbatched
+state and is jittable; the mode rollout vmaps it over scenarios.
 """
 
 from __future__ import annotations
@@ -12,20 +12,20 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.datatypes import SimulatorState
-from vmax_sim.env.agent_view import agent_view, check_agent_paths, choose_agents  # noqa: F401 (re-exported)
+from vmax_sim.env.agent_view import (  # noqa: F401 (re-exported)
+    AgentFn,
+    agent_view,
+    agents_action,
+    check_agent_paths,
+    choose_agents,
+    stop_sign_points,
+)
 from vmax_sim.env.metrics_adapter import sdc_index, sdc_observation, step_inputs
 from vmax_sim.evaluation.modes import EvalMode
 from vmax_sim.evaluation.policies import Policy
 from vmax_sim.metrics import MetricsConfig, overlaps, shared_queries
 from vmax_sim.observation import ObservationConfig
-from vmax_sim.policies.traffic import (  # noqa: F401 (re-exported)
-    AgentFn,
-    agents_action,
-    idm_driver,
-    log_cap_acceleration,
-    logged_top_speed,
-    stop_sign_points,
-)
+from vmax_sim.policies.traffic import idm_driver, log_cap_acceleration, logged_top_speed  # noqa: F401 (re-exported)
 
 
 def other_collision(state: SimulatorState, slots: jax.Array, slot_valid: jax.Array) -> jax.Array:

@@ -1,66 +1,24 @@
-"""Traffic drivers: planners that drive objects other than the SDC along their own paths.
+"""IDM traffic: IDM + pure pursuit driving an agent along its own path, as an `AgentFn`.
 
-Every planner of the project drives "the SDC of a state along `state.sdc_paths`". An agent is driven
-by handing the planner the agent's view of the state (`agent_view`): the same state with the SDC
-flag moved to the agent's slot and its own path (`SimulatorState.agent_paths`) as the only route.
-The planner then sees every other object, the real SDC included, as traffic: IDM's leader detection,
-red lights, stop signs and bend speeds work for agents unchanged. `agents_action` vmaps this over
-the chosen agent slots (static count, no Python loop) and scatters the actions into one `Action`.
+Every planner of the project drives "the SDC of a state along `state.sdc_paths`"; handed an agent's view
+(`vmax_sim.env.agent_view`), IDM drives that agent and sees every other object, the real SDC included, as
+traffic: leader detection, red lights, stop signs and bend speeds work for agents unchanged.
 
-Reactive evaluation (`vmax_sim.evaluation.reactive`) and IDM traffic while training
-(`LearningEnv(traffic="idm")`) both drive their agents with these. Everything works on one unbatched
-state and is jittable.
+Reactive evaluation (`vmax_sim.evaluation.reactive`) and IDM traffic while training (`LearningEnv(traffic=
+idm_traffic)`, `train.traffic=idm`) both drive their agents with `idm_driver`. Jittable, one unbatched view.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import jax
 import jax.numpy as jnp
 
-from vmax_sim.datatypes import Action, RoadgraphPoints, SimulatorState
-from vmax_sim.env.agent_view import agent_view
+from vmax_sim.datatypes import SimulatorState
+from vmax_sim.env.agent_view import AgentFn
 from vmax_sim.env.metrics_adapter import sdc_index
 
-MAX_STOP_SIGN_POINTS = 64  # stop-sign points handed to the agents' views (the nearest the SDC)
 LOG_CAP_WINDOW_M = (10.0, 60.0)  # m behind / ahead of the agent where its logged position is looked for
 AGENT_SPEEDS = ("limit", "log")  # an IDM agent's desired speed: its fastest logged speed, or the lane's limit
-
-# (params, agent view, key) -> the agent's action (action_dim,) in the env's convention, and its validity ()
-AgentFn = Callable[[object, SimulatorState, jax.Array], tuple[jax.Array, jax.Array]]
-
-
-def stop_sign_points(state: SimulatorState, max_points: int = MAX_STOP_SIGN_POINTS) -> RoadgraphPoints:
-    """The roadgraph's stop-sign points (nearest the SDC first, at most max_points), as a small
-    RoadgraphPoints: the only part of `roadgraph_points` the planners read (map queries go through the
-    map index). Handing it to the agents' views keeps K agents from each scanning the whole roadgraph
-    every step. -> RoadgraphPoints (max_points,)."""
-    from scenariomax.schema import RG_STOP_SIGN
-
-    rg = state.roadgraph_points
-    sdc = sdc_index(state)
-    t = state.timestep
-    centre = jnp.stack([state.log_trajectory.x[sdc, t], state.log_trajectory.y[sdc, t]])
-    is_sign = rg.valid & (rg.types == RG_STOP_SIGN)
-    distance = jnp.hypot(rg.x - centre[0], rg.y - centre[1])
-    k = min(max_points, rg.x.shape[-1])
-    _, index = jax.lax.top_k(-jnp.where(is_sign, distance, jnp.inf), k)
-    kept = jax.tree.map(lambda a: a[index], rg)
-    return kept.replace(valid=is_sign[index])
-
-
-def agents_action(state: SimulatorState, slots: jax.Array, slot_valid: jax.Array, agent_fn: AgentFn, params,
-                  key: jax.Array, action_dim: int, roadgraph: RoadgraphPoints | None = None) -> Action:
-    """Actions of the agents in `slots` (K,) (where slot_valid) from `agent_fn` on their views (`agent_view`,
-    with `roadgraph` in them when given); every other row is zero and invalid. -> Action (N, action_dim)."""
-    num = state.num_objects
-    keys = jax.random.split(key, slots.shape[0])
-    data, valid = jax.vmap(lambda slot, k: agent_fn(params, agent_view(state, slot, roadgraph), k))(slots, keys)
-    target = jnp.where(slot_valid, slots, num)  # out of range: dropped by the scatter
-    full = jnp.zeros((num, action_dim), jnp.float32).at[target].set(data.astype(jnp.float32), mode="drop")
-    full_valid = jnp.zeros((num, 1), bool).at[target, 0].set(valid & slot_valid, mode="drop")
-    return Action(data=full, valid=full_valid)
 
 
 def logged_top_speed(state: SimulatorState, first: int, last: int) -> jax.Array:
@@ -129,3 +87,9 @@ def idm_driver(env, config=None, speed: str = "log", follow_log: bool = True) ->
         return action.data[slot], action.valid[slot, 0]
 
     return agent_fn
+
+
+def idm_traffic(env) -> AgentFn:
+    """The IDM traffic of training (`train.traffic=idm`): the reactive evaluation's default agents, at most their
+    logged pace and never ahead of their logged position."""
+    return idm_driver(env, speed="log", follow_log=True)

@@ -20,7 +20,6 @@ from typing import Any
 from scenariomax import SyntheticKnobs
 from vmax_sim.agents import ALGORITHMS, get_config
 from vmax_sim.env.config import EnvConfig
-from vmax_sim.env.learning import check_traffic
 from vmax_sim.env.selfplay import SelfPlayConfig
 from vmax_sim.networks import ENCODER_NAMES, EncoderConfig
 from vmax_sim.observation import NoiseConfig, ObservationConfig
@@ -45,6 +44,9 @@ class TrainDataConfig:
     num_points_per_path: int = 300
     max_num_lights: int = 16
     shuffle_buffer: int = 256
+
+
+TRAFFIC_CHOICES = ("log", "idm")  # train.traffic: who drives the objects other than the SDC while training
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,7 +89,10 @@ class LoopConfig:
                 raise ValueError(f"train.{name} must be at least 1, got {getattr(self, name)}")
         if self.pool_refresh is not None and (self.pool_refresh < 0 or self.pool_refresh > self.pool_size):
             raise ValueError(f"train.pool_refresh must be in [0, pool_size={self.pool_size}], got {self.pool_refresh}")
-        check_traffic(self.traffic, self.traffic_agents, prefix="train.")
+        if self.traffic not in TRAFFIC_CHOICES:
+            raise ValueError(f"train.traffic must be one of {', '.join(TRAFFIC_CHOICES)}, got {self.traffic!r}")
+        if self.traffic_agents < 1:
+            raise ValueError(f"train.traffic_agents must be at least 1, got {self.traffic_agents}")
         if self.buffer_dtype not in ("float16", "bfloat16", "float32"):
             raise ValueError(f"train.buffer_dtype must be float16, bfloat16 or float32, got {self.buffer_dtype!r}")
 

@@ -41,6 +41,7 @@ from vmax_sim.data.mixture import SYNTHETIC, format_sources, parse_sources, sour
 from vmax_sim.env.learning import LearningEnv
 from vmax_sim.env.selfplay import SelfPlayEnv
 from vmax_sim.networks import make_encoder
+from vmax_sim.policies.traffic import idm_traffic
 from vmax_sim.training import distributed
 from vmax_sim.training.checkpoint import CheckpointStore
 from vmax_sim.training.config import (
@@ -110,10 +111,13 @@ def components(config: TrainConfig):
                           action_repeat=action_repeat(config))
     else:
         env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.algo in EXPERT_LABELLED,
-                          action_repeat=action_repeat(config), traffic=config.train.traffic,
+                          action_repeat=action_repeat(config), traffic=TRAFFIC_DRIVERS[config.train.traffic],
                           traffic_agents=config.train.traffic_agents)
     return env, build_learner(config, env)
 
+
+# train.traffic -> LearningEnv.traffic (None: the log)
+TRAFFIC_DRIVERS = {"log": None, "idm": idm_traffic}
 
 _CHUNKS: dict = {}
 
