@@ -23,6 +23,7 @@ import multiprocessing
 import os
 import re
 import shutil
+import socket
 import time
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -598,24 +599,54 @@ def ray_window(requested_workers: int | None, cluster_cpus: float) -> int:
     return 2 * slots
 
 
+def check_ray_address(address: str | None, timeout_s: float = 5.0) -> None:
+    """ConversionError (one line) when nothing listens at a `HOST:PORT` (or `ray://HOST:PORT`) cluster address:
+    `ray.init` would wait minutes on it before failing with a traceback. "auto" / "local" are Ray's to resolve."""
+    if not address or address in ("auto", "local"):
+        return
+    where = address.removeprefix("ray://")
+    host, _, port = where.rpartition(":")
+    if not host or not port.isdigit():
+        raise ConversionError(f"--address {address!r}: expected HOST:PORT (or ray://HOST:PORT, or auto)")
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout_s).close()
+    except OSError as error:
+        raise ConversionError(f"--address {address}: no Ray cluster answers there ({error.strerror or error}); "
+                              "start one with `ray start --head` or fix the address") from None
+
+
+def ray_failure(unit: str, error: BaseException) -> ConversionError:
+    """The one-line error of a Ray task that failed outside the converter's own per-scenario handling (its worker
+    or node died, the object store ran out): bad inputs never get here, they are manifest failures."""
+    first_line = (str(error).strip().splitlines() or [""])[0][:200]
+    return ConversionError(f"the Ray task converting {unit} failed ({type(error).__name__}: {first_line}); "
+                           "rerun with --resume to continue")
+
+
 def _results_ray(source: Source, units: Sequence[str], settings: ConvertSettings, workers: int) -> Iterator[UnitResult]:
     try:
         import ray  # optional extra
     except ImportError:
         raise ConversionError("--engine ray needs the ray extra: pip install 'vmax[ray]'") from None
     if not ray.is_initialized():
-        ray.init(**ray_init_options(settings.ray_address, os.environ, workers), ignore_reinit_error=True,
-                 log_to_driver=False)
+        options = ray_init_options(settings.ray_address, os.environ, workers)
+        check_ray_address(options.get("address"))
+        ray.init(**options, ignore_reinit_error=True, log_to_driver=False)
     remote = ray.remote(convert_unit_in_memory)
     window = ray_window(settings.workers, ray.cluster_resources().get("CPU", 0))
-    refs: list = []
+    refs: list = []  # (unit, object ref), oldest first
     next_unit = 0
     while next_unit < len(units) or refs:
         while next_unit < len(units) and len(refs) < window:
-            refs.append(remote.remote(source, units[next_unit], settings.sizes, settings.transform,
-                                      settings.compression))
+            refs.append((units[next_unit], remote.remote(source, units[next_unit], settings.sizes,
+                                                         settings.transform, settings.compression)))
             next_unit += 1
-        yield ray.get(refs.pop(0))  # in order, so shards are deterministic
+        unit, ref = refs.pop(0)
+        try:
+            result = ray.get(ref)  # in order, so shards are deterministic
+        except ray.exceptions.RayError as error:
+            raise ray_failure(unit, error) from None
+        yield result
 
 
 def convert(source: Source, settings: ConvertSettings) -> ConversionResult:
