@@ -46,6 +46,16 @@ def choose_agents(state: SimulatorState, max_agents: int, timestep: int) -> tupl
     return slots.astype(jnp.int32), eligible[slots]
 
 
+def control_agents(state: SimulatorState, slots: jax.Array, valid: jax.Array,
+                   bound: int | None = None) -> SimulatorState:
+    """The state with the SDC and the agents in `slots` (K,) (where `valid`) marked controlled, so the dynamics
+    move them from actions; bound: `max_controlled` (the dynamics then run on that many rows only), None for none."""
+    num = state.num_objects
+    driven = jnp.zeros(num, bool).at[jnp.where(valid, slots, num)].set(True, mode="drop")
+    meta = state.object_metadata
+    return state.replace(object_metadata=meta.replace(is_controlled=meta.is_sdc | driven, max_controlled=bound))
+
+
 def agent_view(state: SimulatorState, slot: jax.Array, roadgraph: RoadgraphPoints | None = None) -> SimulatorState:
     """The state as the agent in `slot` sees it: it is "the SDC" and its own path is the only route
     (on_route). The real SDC becomes an ordinary object. roadgraph: replaces `roadgraph_points` (e.g.

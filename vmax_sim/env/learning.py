@@ -4,9 +4,9 @@ The SDC is driven by the policy (actions in [-1, 1], mapped onto the dynamics' b
 object replays the log, or (`traffic`, e.g. `vmax_sim.policies.traffic.idm_traffic`) up to `traffic_agents`
 controllable agents nearest the SDC follow their own paths with that driver, so traffic reacts to a learner
 that drives differently from the logged SDC (a log-replayed follower drives into a learner that brakes).
-Each step computes the metrics once and derives from them the reward, the
-termination (collision / off-road / red light, as `EnvConfig.terminate_on`), the truncation (episode
-length or end of the log) and the next observation, which reuses the metrics' candidate objects and
+Each step computes the metrics once and derives from them the reward, the termination (collision /
+off-road / red light, as `EnvConfig.terminate_on`), the truncation (episode length or end of the log)
+and the next observation, which reuses the metrics' candidate objects and
 path projection. Finished episodes restart on the next scenario of a device-side pool (auto-reset);
 the transition of the finishing step keeps the true last observation, so a time-limit truncation
 can be bootstrapped while a crash is not.
@@ -25,7 +25,14 @@ import jax.numpy as jnp
 from flax import struct
 
 from vmax_sim.datatypes import RoadgraphPoints, SimulatorState, sdc_action
-from vmax_sim.env.agent_view import AgentFn, agents_action, check_agent_paths, choose_agents, stop_sign_points
+from vmax_sim.env.agent_view import (
+    AgentFn,
+    agents_action,
+    check_agent_paths,
+    choose_agents,
+    control_agents,
+    stop_sign_points,
+)
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.environment import Environment
 from vmax_sim.env.metrics_adapter import reference_arcs, sdc_index, sdc_observation, step_inputs
@@ -131,7 +138,7 @@ class LearningEnv:
         return shared, step_metrics(sim.map_index, inputs, self.metrics_config, shared)
 
     def _start(self, sim: SimulatorState):
-        """Reset one scene: state, arcs, shared queries, metrics, observation, IDM-driven agents (or None)."""
+        """Reset one scene: state, arcs, shared queries, metrics, observation, traffic agents (or None)."""
         sim = self.core.reset(sim)
         sim, traffic = self._choose_traffic(sim)
         arcs = reference_arcs(sim, self.env_config)
@@ -143,10 +150,7 @@ class LearningEnv:
         if self.traffic is None:
             return sim, None
         slots, valid = choose_agents(sim, self.traffic_agents, self.env_config.first_policy_timestep)
-        driven = jnp.zeros(sim.num_objects, bool).at[jnp.where(valid, slots, sim.num_objects)].set(True, mode="drop")
-        meta = sim.object_metadata
-        sim = sim.replace(object_metadata=meta.replace(is_controlled=meta.is_sdc | driven,
-                                                       max_controlled=1 + slots.shape[0]))
+        sim = control_agents(sim, slots, valid, bound=1 + slots.shape[0])
         return sim, TrafficAgents(slots=slots, valid=valid, signs=stop_sign_points(sim))
 
     def _full_action(self, sim: SimulatorState, action: jax.Array, traffic: TrafficAgents | None, key: jax.Array):

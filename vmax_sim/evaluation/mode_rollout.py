@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.datatypes import SimulatorState
+from vmax_sim.env.agent_view import control_agents
 from vmax_sim.env.chunked_vmap import chunked_vmap
 from vmax_sim.env.metrics_adapter import reference_arcs, sdc_observation, step_inputs
 from vmax_sim.env.multi_agent import sdc_and_agents_action
@@ -61,10 +62,7 @@ def run_mode_episode(env, policy: Policy, mode: EvalMode, state: SimulatorState,
         agent_fn = agent_fn or make_agent_fn(mode, env, policy, metrics_config, obs_config)
         slots, slot_valid = choose_agents(state, mode.max_agents, first)
         signs = stop_sign_points(state)  # once per episode: the agents never scan the whole roadgraph
-        driven = jnp.zeros(state.num_objects, bool).at[jnp.where(slot_valid, slots, state.num_objects)].set(
-            True, mode="drop")
-        meta = state.object_metadata
-        state = state.replace(object_metadata=meta.replace(is_controlled=meta.is_sdc | driven))
+        state = control_agents(state, slots, slot_valid)
         extra["num_agents"] = jnp.sum(slot_valid).astype(jnp.float32)
     arcs = reference_arcs(state, env.config)
     num_steps = env.config.episode_length

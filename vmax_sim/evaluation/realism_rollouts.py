@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.datatypes import Action, SimulatorState, sdc_action
+from vmax_sim.env.agent_view import control_agents
 from vmax_sim.env.metrics_adapter import sdc_index, sdc_observation, step_inputs
 from vmax_sim.env.multi_agent import sdc_and_agents_action
 from vmax_sim.evaluation.modes import EvalMode
@@ -85,10 +86,7 @@ def policy_rollout_fn(env, sdc_policy: Policy, agent_fn: AgentFn | None, num_rol
         state = env.reset(state)
         slots, valid = evaluated_objects(state, max_agents, first)
         agents, agents_valid = slots[1:], valid[1:]
-        num = state.num_objects
-        driven = jnp.zeros(num, bool).at[jnp.where(agents_valid, agents, num)].set(True, mode="drop")
-        meta = state.object_metadata
-        state = state.replace(object_metadata=meta.replace(is_controlled=meta.is_sdc | driven))
+        state = control_agents(state, agents, agents_valid)
         signs = stop_sign_points(state) if agent_fn is not None else None
 
         def body(state, step_key):
