@@ -158,6 +158,16 @@ def project_to_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.nd
     return np.sqrt(dist2), arc, np.stack([foot_x, foot_y], axis=1)
 
 
+def _box_gap2(p: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """max(max(low - p, p - high), 0) ** 2 along one axis: the squared gap from points p (m, 1) to the
+    intervals low..high (C,), computed in place. -> (m, C)"""
+    gap = low - p
+    np.maximum(gap, p - high, out=gap)
+    np.maximum(gap, 0.0, out=gap)
+    gap *= gap
+    return gap
+
+
 def project_to_polylines(points: np.ndarray, polylines: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
     """(distance (m,), foot arc (m,)) of the points on each polyline, as `project_to_polyline` gives them (the
     same values, ties included), for many polylines at once: the pruned search of `_nearest_pruned` with
@@ -198,12 +208,18 @@ def project_to_polylines(points: np.ndarray, polylines: list[np.ndarray]) -> lis
     high = np.maximum(np.maximum.reduceat(vertex, first_vertex, axis=0), vertex[last_vertex])
     # reduceat runs to the next chunk's first vertex: for a polyline's last chunk that is its own last vertex.
     px, py = pts[:, 0:1], pts[:, 1:2]  # (m, 1)
-    gap_x = np.maximum(np.maximum(low[:, 0] - px, px - high[:, 0]), 0.0)  # (m, C)
-    gap_y = np.maximum(np.maximum(low[:, 1] - py, py - high[:, 1]), 0.0)
-    lower2 = gap_x * gap_x + gap_y * gap_y
+    # The (m, C) bounds below are the largest arrays of the search: updated in place (the same arithmetic as
+    # max(max(low - p, p - high), 0) squared and summed, without a temporary per operation).
+    lower2 = _box_gap2(px, low[:, 0], high[:, 0])  # (m, C)
+    lower2 += _box_gap2(py, low[:, 1], high[:, 1])
     to_x, to_y = px - vertex[first_vertex, 0], py - vertex[first_vertex, 1]
-    upper2 = np.minimum.reduceat(to_x * to_x + to_y * to_y, run_starts(num_chunks), axis=1)  # (m, L)
-    point, chunk = np.nonzero(lower2 <= upper2[:, chunk_line] * (1.0 + 1e-9) + 1e-9)
+    to_x *= to_x
+    to_y *= to_y
+    to_x += to_y
+    upper2 = np.minimum.reduceat(to_x, run_starts(num_chunks), axis=1)  # (m, L)
+    upper2 *= 1.0 + 1e-9  # margin: rounding never prunes the nearest
+    upper2 += 1e-9
+    point, chunk = np.nonzero(lower2 <= upper2[:, chunk_line])
     line_of = chunk_line[chunk]  # (p,)
     local = first_seg[chunk][:, None] + np.arange(_CHUNK)  # (p, B) segment index within its polyline
     real = local < num_seg[line_of][:, None]
@@ -229,7 +245,14 @@ def project_to_polylines(points: np.ndarray, polylines: list[np.ndarray]) -> lis
 def point_at_arc(polyline: np.ndarray, cum: np.ndarray, arcs: np.ndarray) -> np.ndarray:
     """Points at the given arc lengths (linear interpolation per coordinate). -> (m, d)"""
     arcs = np.asarray(arcs, np.float64)
-    return np.stack([np.interp(arcs, cum, polyline[:, k]) for k in range(polyline.shape[1])], axis=1)
+    if arcs.ndim != 1:
+        return np.stack([np.interp(arcs, cum, polyline[:, k]) for k in range(polyline.shape[1])], axis=1)
+    # Columns written into one array: np.stack costs more than the interpolation on the short inputs of the
+    # path search (hundreds of calls per scenario); the values are np.interp's either way.
+    out = np.empty((len(arcs), polyline.shape[1]))
+    for k in range(polyline.shape[1]):
+        out[:, k] = np.interp(arcs, cum, polyline[:, k])
+    return out
 
 
 def slice_polyline(polyline: np.ndarray, cum: np.ndarray, start: float, stop: float) -> np.ndarray:
@@ -238,7 +261,8 @@ def slice_polyline(polyline: np.ndarray, cum: np.ndarray, start: float, stop: fl
     if stop <= start:
         return point_at_arc(polyline, cum, [start])
     inner = (cum > start) & (cum < stop)
-    return np.vstack([point_at_arc(polyline, cum, [start]), polyline[inner], point_at_arc(polyline, cum, [stop])])
+    ends = point_at_arc(polyline, cum, [start, stop])  # both ends in one call (np.interp is per element)
+    return np.concatenate([ends[:1], polyline[inner], ends[1:]])
 
 
 def segment_distances(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:

@@ -46,6 +46,7 @@ from scenariomax.enrich.geometry import (
     point_at_arc,
     project_to_polyline,
     project_to_polylines,
+    row_norm,
     slice_polyline,
 )
 from scenariomax.enrich.lane_graph import LaneGraph
@@ -157,6 +158,8 @@ class _TrackNearLanes:
     def __init__(self, lanes: Lanes, track: np.ndarray, radius: float):
         self.lanes, self.track, self.radius = lanes, track, radius
         self._done: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        # x and y apart: comparing (m, 2) and reducing over the 2-wide axis costs more than the test itself.
+        self._x, self._y = track[:, 0], track[:, 1]
 
     def of(self, lane: int) -> tuple[np.ndarray, np.ndarray]:
         if lane not in self._done:
@@ -165,7 +168,8 @@ class _TrackNearLanes:
 
     def _project(self, lane: int) -> tuple[np.ndarray, np.ndarray]:
         low, high = self.lanes.boxes[lane, :2] - self.radius - 1.0, self.lanes.boxes[lane, 2:] + self.radius + 1.0
-        near = np.flatnonzero(((self.track >= low) & (self.track <= high)).all(axis=1))  # (k,)
+        near = np.flatnonzero((self._x >= low[0]) & (self._x <= high[0]) & (self._y >= low[1])
+                              & (self._y <= high[1]))  # (k,)
         dist, arc = np.full(len(self.track), np.inf), np.full(len(self.track), np.nan)
         if near.size:  # each position's projection is computed on its own: a subset gives the same values
             dist[near], arc[near], _ = project_to_polyline(self.track[near], self.lanes.polyline(lane))
@@ -215,7 +219,7 @@ def _logged_change(on_lanes: _TrackNearLanes, lane_a: int, cum_a: np.ndarray, la
 
 def _direction_at(line: np.ndarray, cum: np.ndarray, arc: float) -> np.ndarray:
     """Unit direction (2,) of a polyline (n >= 2, 3) at arc length `arc`: its segment there."""
-    segment = int(np.clip(np.searchsorted(cum, arc, side="right") - 1, 0, len(line) - 2))
+    segment = min(max(int(cum.searchsorted(arc, side="right")) - 1, 0), len(line) - 2)  # np.clip on plain ints
     step = line[segment + 1, :2] - line[segment, :2]
     return step / max(float(np.hypot(*step)), 1e-9)
 
@@ -291,7 +295,7 @@ def _bridge(lanes: Lanes, end: np.ndarray, track: np.ndarray, rejoins: tuple[np.
     for every bridge of a search: computed once)."""
     if len(track) < 2:
         return None
-    gap = np.linalg.norm(track - end[:2], axis=1)
+    gap = row_norm(track - end[:2])  # np.linalg.norm(..., axis=1), the same bits
     first = int(gap.argmin())
     if gap[first] > settings.max_bridge_start_gap_m or first + 1 >= len(track):
         return None
@@ -382,7 +386,8 @@ def _candidates(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]],
     for pieces in _enumerate(lanes, graph, starts, track, track_yaw, settings):
         path = _resample(pieces, settings)
         lane = path.lane
-        key = (tuple(lane[np.r_[True, lane[1:] != lane[:-1]]]), len(path.xyz), tuple(np.round(path.xyz[-1, :2], 1)))
+        changes = np.concatenate(([True], lane[1:] != lane[:-1]))  # np.r_ without its index-trick overhead
+        key = (tuple(lane[changes]), len(path.xyz), tuple(np.round(path.xyz[-1, :2], 1)))
         if key not in seen:
             seen.add(key)
             out.append(path)
