@@ -155,7 +155,9 @@ def project_to_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.nd
     cum = np.zeros(len(line))  # arc_lengths(line), from the segment lengths at hand
     np.cumsum(np.sqrt(raw_len2), out=cum[1:])
     arc = cum[best] + frac * np.sqrt(seg_len2[best])
-    return np.sqrt(dist2), arc, np.stack([foot_x, foot_y], axis=1)
+    foot = np.empty((len(pts), 2))  # np.stack costs more than the rest on the short inputs of the path search
+    foot[:, 0], foot[:, 1] = foot_x, foot_y
+    return np.sqrt(dist2), arc, foot
 
 
 def _box_gap2(p: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:

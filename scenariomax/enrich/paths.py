@@ -242,10 +242,14 @@ def _lane_change(lanes: Lanes, lane_a: int, arc_from: float, lane_b: int, on_lan
         weights = u * u * (3.0 - 2.0 * u)
     else:
         return None
+    # Most changes end here (on WOMD ~9 in 10 of those offered): B no longer runs beside A where the change
+    # would end. The end point alone tells, and a point's projection does not depend on the others projected
+    # with it, so the whole blend is only projected for a change that passes (the same values either way).
+    end_offset, end_arc, _ = project_to_polyline(point_at_arc(line_a, cum_a, arcs[-1:]), line_b)
+    if end_offset[0] > settings.max_change_offset_m or end_arc[0] >= cum_b[-1] - 1e-3:
+        return None  # B does not run alongside A where the change ends
     on_a = point_at_arc(line_a, cum_a, arcs)
     offset, arc_b, _ = project_to_polyline(on_a, line_b)
-    if offset[-1] > settings.max_change_offset_m or arc_b[-1] >= cum_b[-1] - 1e-3:
-        return None  # B does not run alongside A where the change ends
     if _direction_at(line_a, cum_a, arcs[-1]) @ _direction_at(line_b, cum_b, arc_b[-1]) <= 0.0:
         # B runs the other way (AV2 names the oncoming lane a neighbour): "changing" into it turns the path back
         # along itself, a loop past the log's end and outside the road edges
