@@ -139,10 +139,13 @@ def _neighbor_pairs(lanes: Lanes, edge_xy: np.ndarray, settings: LaneGraphSettin
     side = np.sign(sample_dir[rows, 0] * offset[:, 1] - sample_dir[rows, 1] * offset[:, 0])  # + left
     lane_a, lane_b = sample_lane[rows], sample_lane[other]
     # One vote per (sample, neighbour lane): a sample may see several points of the same lane.
-    key = np.unique(np.stack([rows, lane_b], 1), axis=0, return_index=True)[1]
+    # Pairs of non-negative ints as one int64 key (a * K + b sorts as the rows (a, b) do): np.unique on 1-D keys,
+    # several times cheaper than np.unique(axis=0), with the same order and first occurrences.
+    num = lanes.num_lanes
+    key = np.unique(rows * num + lane_b, return_index=True)[1]
     lane_a, lane_b, side, rows = lane_a[key], lane_b[key], side[key], rows[key]
-    pair_keys, inverse, counts = np.unique(np.stack([lane_a, lane_b], 1), axis=0, return_inverse=True,
-                                           return_counts=True)
+    pairs, inverse, counts = np.unique(lane_a * num + lane_b, return_inverse=True, return_counts=True)
+    pair_keys = np.stack([pairs // num, pairs % num], 1)
     inverse = inverse.reshape(-1)
     side_votes = np.zeros(len(pair_keys))
     np.add.at(side_votes, inverse, side)
