@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from scenariomax.errors import InputError
+from scenariomax.schema import RG_STOP_SIGN
 from vmax_sim.data import DataConfig
 from vmax_sim.data.convert import stack_states
 from vmax_sim.data.loader import (
@@ -36,14 +37,22 @@ from vmax_sim.data.loader import (
 )
 from vmax_sim.data.mixture import is_mixture, iter_mixed_indexed_records, iter_mixed_indexed_scenarios, parse_sources
 from vmax_sim.datatypes import SimulatorState
+from vmax_sim.env.agent_view import MAX_STOP_SIGN_POINTS
 
 _END = object()
 
 
-def slim_state(state: SimulatorState) -> SimulatorState:
-    """Drops the raw roadgraph points (a quarter of a state's bytes): the learning environment's metrics and
-    observation read the map index built from them, never the points. One point is kept for the shapes."""
-    return state.replace(roadgraph_points=jax.tree.map(lambda a: a[:1], state.roadgraph_points))
+def slim_state(state: SimulatorState, max_signs: int = MAX_STOP_SIGN_POINTS) -> SimulatorState:
+    """Keeps only the stop-sign points of the raw roadgraph (the rest is a quarter of a state's bytes): the
+    learning environment's metrics and observation read the map index built from the points, never the points;
+    the planners that drive traffic or teach (IDM, PDM-Closed) read the stop signs. The first `max_signs` sign
+    points in roadgraph order, padded with invalid points, so every slim state has the same shapes."""
+    rg = state.roadgraph_points
+    signs = np.flatnonzero(np.asarray(rg.valid) & (np.asarray(rg.types) == RG_STOP_SIGN))[:max_signs]
+    index = np.zeros(max_signs, np.int64)
+    index[:signs.size] = signs
+    kept = jax.tree.map(lambda a: np.asarray(a)[index], rg)
+    return state.replace(roadgraph_points=kept.replace(valid=np.arange(max_signs) < signs.size))
 
 
 def stream_items(config: DataConfig) -> Iterator:
