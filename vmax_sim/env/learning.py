@@ -78,7 +78,7 @@ class StepOutput:
 
     observation: Observation  # (B, ...) before the step
     action: jax.Array  # (B, A) float32 in [-1, 1], what was applied
-    expert_action: jax.Array  # (B, A) float32 in [-1, 1], the log-following action at the same state
+    expert_action: jax.Array  # (B, A) float32 in [-1, 1], the label at the same state (teacher's or log-following)
     reward: jax.Array  # (B,) float32
     terminated: jax.Array  # (B,) bool, collision / off-road / red light ended the episode
     truncated: jax.Array  # (B,) bool, time limit or end of log (and not terminated)
@@ -112,6 +112,9 @@ class LearningEnv:
     # agents' driver (`vmax_sim.policies.traffic.idm_traffic`); the env floor cannot import the planners
     traffic: Callable[[Environment], AgentFn] | None = None
     traffic_agents: int = 8  # with traffic: at most this many agents are driven, the rest replay the log
+    # who labels the SDC's steps (StepOutput.expert_action, what BC imitates): None (the log-following action) or
+    # a factory (core Environment) -> the teacher, one state -> (A,) in [-1, 1] (`vmax_sim.policies.teacher`)
+    teacher: Callable[[Environment], Callable[[SimulatorState], jax.Array]] | None = None
 
     def __post_init__(self) -> None:
         if self.env_config.controlled != "sdc":
@@ -124,6 +127,8 @@ class LearningEnv:
         object.__setattr__(self, "core", Environment(config))
         if self.traffic is not None:
             object.__setattr__(self, "_agent_fn", self.traffic(self.core))
+        if self.teacher is not None:
+            object.__setattr__(self, "_teacher_fn", self.teacher(self.core))
 
     @property
     def action_dim(self) -> int:
@@ -163,7 +168,10 @@ class LearningEnv:
         return sdc_and_agents_action(sim, full, others)
 
     def _expert(self, sim: SimulatorState) -> jax.Array:
-        """The SDC's log-following action in [-1, 1] (inverse dynamics of the SDC's row only). (A,)"""
+        """The SDC's label in [-1, 1]: the teacher's action, or the log-following one (inverse dynamics of the SDC's
+        row only). (A,)"""
+        if self.teacher is not None:
+            return self._teacher_fn(sim)
         sdc = sdc_index(sim)
         row = lambda trajectory: jax.tree.map(lambda a: jax.lax.dynamic_slice_in_dim(a, sdc, 1, 0),  # noqa: E731
                                               trajectory)
@@ -236,14 +244,18 @@ class LearningEnv:
             next_scenario=jnp.asarray(batch_size % pool_size, jnp.int32), key=key, traffic=traffic)
 
     def expert_action(self, state: LearningState) -> jax.Array:
-        """The log-following SDC action of every running episode. (B, A) in [-1, 1]"""
+        """The label of every running episode's SDC (the teacher's action, or the log-following one). (B, A) in
+        [-1, 1]"""
         return jax.vmap(self._expert)(state.sim)
 
-    def step(self, state: LearningState, action: jax.Array, pool: SimulatorState) -> tuple[LearningState, StepOutput]:
-        """Applies action (B, A) in [-1, 1]; finished episodes restart on the next pool scenarios."""
+    def step(self, state: LearningState, action: jax.Array, pool: SimulatorState,
+             expert: jax.Array | None = None) -> tuple[LearningState, StepOutput]:
+        """Applies action (B, A) in [-1, 1]; finished episodes restart on the next pool scenarios. `expert`: this
+        state's labels when the caller computed them already (a planner teacher is costly), else computed here."""
         batch_size = action.shape[0]
         action = jnp.clip(action, -1.0, 1.0)
-        expert = self.expert_action(state) if self.expert_labels else jnp.zeros_like(action)
+        if expert is None:
+            expert = self.expert_action(state) if self.expert_labels else jnp.zeros_like(action)
         key, step_key = jax.random.split(state.key)
         sim, shared, metrics, reward, terminated, truncated, seen, next_obs = jax.vmap(self._advance)(
             state.sim, state.arcs, state.metrics, action, state.traffic, jax.random.split(step_key, batch_size))

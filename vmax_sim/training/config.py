@@ -47,6 +47,7 @@ class TrainDataConfig:
 
 
 TRAFFIC_CHOICES = ("log", "idm")  # train.traffic: who drives the objects other than the SDC while training
+TEACHER_CHOICES = ("log", "idm", "pdm")  # train.teacher: whose actions label BC's (and BC+SAC's) steps
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,6 +76,10 @@ class LoopConfig:
     # logged position: a follower brakes for a learner that brakes). Evaluation stays non-reactive.
     traffic: str = "log"
     traffic_agents: int = 8
+    # whose action labels each step for the algorithms that imitate (bc, bc_sac): "log" (the log-following
+    # action), or a planner the evaluation also runs, "idm" or "pdm" (PDM-Closed), whose action is a function of
+    # the state and so can be imitated at every state the run visits; bc also drives with it (plus its noise)
+    teacher: str = "log"
     seed: int = 0
     # wall-clock budget of the training loop (minutes; setup and compilation excluded, evaluations during training
     # included): the run stops at the first chunk past it with a final checkpoint and a final evaluation
@@ -93,6 +98,8 @@ class LoopConfig:
             raise ValueError(f"train.traffic must be one of {', '.join(TRAFFIC_CHOICES)}, got {self.traffic!r}")
         if self.traffic_agents < 1:
             raise ValueError(f"train.traffic_agents must be at least 1, got {self.traffic_agents}")
+        if self.teacher not in TEACHER_CHOICES:
+            raise ValueError(f"train.teacher must be one of {', '.join(TEACHER_CHOICES)}, got {self.teacher!r}")
         if self.buffer_dtype not in ("float16", "bfloat16", "float32"):
             raise ValueError(f"train.buffer_dtype must be float16, bfloat16 or float32, got {self.buffer_dtype!r}")
 
@@ -120,6 +127,9 @@ class TrainConfig:
         if self.is_selfplay and self.train.traffic != "log":
             raise ValueError("train.traffic=idm drives the agents by IDM, self-play (env.controlled=controllable) by "
                              "the policy: choose one")
+        if self.train.teacher != "log" and self.algo not in ("bc", "bc_sac"):
+            raise ValueError(f"train.teacher labels the steps that bc and bc_sac imitate; {self.algo} imitates "
+                             "nothing: leave train.teacher=log")
         if not isinstance(self.env.controlled, str):
             raise ValueError("env.controlled must be sdc or controllable in training")
         if self.algo_config is None:

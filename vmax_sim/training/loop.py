@@ -91,16 +91,18 @@ def make_off_policy_chunk(env: LearningEnv, learner: Learner, algo: str, algo_co
         key, act_key, random_key, update_key = jax.random.split(carry.key, 4)
         obs = carry.env.observation
         if algo == "bc":
-            # behaviour cloning drives with the log-following expert; optional Gaussian noise on the applied
-            # action (DART-style) visits states off the log, where the closed-loop expert's labels steer back
+            # behaviour cloning drives with the expert (the log-following one, or train.teacher's planner);
+            # optional Gaussian noise on the applied action (DART-style) visits states off the log, where the
+            # closed-loop expert's labels steer back
             expert = env.expert_action(carry.env)
             noise = getattr(algo_config, "behaviour_noise", 0.0)
             action = expert + noise * jax.random.normal(random_key, expert.shape) if noise > 0 else expert
         else:
+            expert = None
             policy_action = learner.act(learner.policy_params(carry.learner), obs, act_key, False)
             random_action = jax.random.uniform(random_key, policy_action.shape, minval=-1.0, maxval=1.0)
             action = jnp.where(carry.env_steps < learning_starts, random_action, policy_action)
-        env_state, out = env.step(carry.env, action, pool)
+        env_state, out = env.step(carry.env, action, pool, expert)
         buffer = replay_add(carry.buffer, transition_of(out))
         env_steps = carry.env_steps + num_envs
         ready = (buffer.size >= algo_config.batch_size) & (env_steps >= learning_starts)

@@ -41,6 +41,7 @@ from vmax_sim.data.mixture import SYNTHETIC, format_sources, parse_sources, sour
 from vmax_sim.env.learning import LearningEnv
 from vmax_sim.env.selfplay import SelfPlayEnv
 from vmax_sim.networks import make_encoder
+from vmax_sim.policies.teacher import idm_teacher, pdm_teacher
 from vmax_sim.policies.traffic import idm_traffic
 from vmax_sim.training import distributed
 from vmax_sim.training.checkpoint import CheckpointStore
@@ -112,12 +113,14 @@ def components(config: TrainConfig):
     else:
         env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.algo in EXPERT_LABELLED,
                           action_repeat=action_repeat(config), traffic=TRAFFIC_DRIVERS[config.train.traffic],
-                          traffic_agents=config.train.traffic_agents)
+                          traffic_agents=config.train.traffic_agents, teacher=TEACHERS[config.train.teacher])
     return env, build_learner(config, env)
 
 
 # train.traffic -> LearningEnv.traffic (None: the log)
 TRAFFIC_DRIVERS = {"log": None, "idm": idm_traffic}
+# train.teacher -> LearningEnv.teacher (None: the log-following action)
+TEACHERS = {"log": None, "idm": idm_teacher, "pdm": pdm_teacher}
 
 _CHUNKS: dict = {}
 

@@ -1,0 +1,84 @@
+"""train.teacher: a planner's action labels BC's steps (and drives them), instead of the log-following action."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from tests.integration_sim.conftest import NUM_STEPS, road_scenario, small_data_config
+from vmax_sim.data import scenarios_to_batch
+from vmax_sim.env import EnvConfig
+from vmax_sim.env.learning import LearningEnv
+from vmax_sim.policies.pdm import PDMConfig, pdm_action
+from vmax_sim.training import apply_overrides, preset_config
+from vmax_sim.training.run import TEACHERS
+
+
+def waiting_scenario():
+    """The logged SDC waits at x = 0 for the whole log on a free 13.4 m/s lane (a car stands 200 m ahead)."""
+    xs = np.stack([np.zeros(NUM_STEPS), np.full(NUM_STEPS, 200.0)])
+    return road_scenario("wait", xs, np.zeros_like(xs))
+
+
+def driven_episode(teacher: str, steps: int = 40):
+    """An episode driven by its own labels (BC without noise) -> (labels (T, A), the SDC's x (T,))."""
+    env = LearningEnv(EnvConfig(max_num_objects=8), teacher=TEACHERS[teacher])
+    pool = scenarios_to_batch([waiting_scenario()], small_data_config(""))
+
+    @jax.jit
+    def episode(pool):
+        state = env.reset(pool, 1, jax.random.PRNGKey(0))
+
+        def body(state, _):
+            label = env.expert_action(state)
+            state, out = env.step(state, label, pool, label)
+            return state, (out.expert_action[0], state.sim.sim_trajectory.x[0, 0, state.sim.timestep[0]], out.done[0])
+        return jax.lax.scan(body, state, None, length=steps)[1]
+
+    labels, xs, done = episode(pool)
+    return env, pool, np.asarray(labels), np.asarray(xs), np.asarray(done)
+
+
+@pytest.mark.slow  # ~60 s on 2 cores (PDM-Closed compiles slowly): the default suite stays under 10 minutes
+def test_a_pdm_teacher_drives_off_where_the_logged_driver_waited():
+    env, pool, labels, xs, done = driven_episode("pdm")
+    assert not done.any()
+    assert labels[0, 0] > 0.03 and labels[:, 0].max() > 0.2  # accelerates toward the limit (jerk-bounded)
+    assert xs[-1] > 8.0  # 4 s later it has driven off
+    # the label is PDM-Closed's own action, as evaluation runs it
+    state = env.core.reset(jax.tree.map(lambda a: a[0], pool))
+    expected = env.core.dynamics.normalize(pdm_action(state, PDMConfig(), env.core.config.first_policy_timestep))
+    np.testing.assert_allclose(labels[0], np.clip(np.asarray(expected), -1, 1), atol=1e-5)
+
+
+def test_the_log_teacher_keeps_the_logged_driver_waiting():
+    _, _, labels, xs, _ = driven_episode("log", steps=20)
+    assert abs(xs[-1]) < 0.5
+    assert labels[0, 0] < 0.05
+
+
+def test_teacher_choices_are_checked():
+    with pytest.raises(ValueError, match="train.teacher must be one of log, idm, pdm"):
+        apply_overrides(preset_config("bc-mlp"), ["train.teacher=expert"])
+    with pytest.raises(ValueError, match="sac imitates nothing"):
+        apply_overrides(preset_config("sac-mlp"), ["train.teacher=pdm"])
+    assert apply_overrides(preset_config("bc_sac-mlp"), ["train.teacher=pdm"]).train.teacher == "pdm"
+
+
+def test_slim_training_states_keep_the_stop_signs():
+    from scenariomax.schema import RG_STOP_SIGN
+    from vmax_sim.env.agent_view import MAX_STOP_SIGN_POINTS
+    from vmax_sim.training.pool import slim_state
+
+    state = jax.tree.map(lambda a: np.asarray(a[0]), scenarios_to_batch([waiting_scenario()], small_data_config("")))
+    rg = state.roadgraph_points
+    types = np.asarray(rg.types).copy()
+    types[[5, 17]] = RG_STOP_SIGN
+    slim = slim_state(state.replace(roadgraph_points=rg.replace(types=types, valid=np.ones_like(rg.valid))))
+    kept = slim.roadgraph_points
+    assert kept.x.shape == (MAX_STOP_SIGN_POINTS,)
+    assert kept.valid.sum() == 2 and (kept.types[kept.valid] == RG_STOP_SIGN).all()
+    np.testing.assert_array_equal(kept.x[:2], np.asarray(rg.x)[[5, 17]])
+    assert jnp.asarray(kept.valid[2:]).sum() == 0
