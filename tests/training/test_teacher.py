@@ -65,6 +65,8 @@ def test_teacher_choices_are_checked():
     with pytest.raises(ValueError, match="sac imitates nothing"):
         apply_overrides(preset_config("sac-mlp"), ["train.teacher=pdm"])
     assert apply_overrides(preset_config("bc_sac-mlp"), ["train.teacher=pdm"]).train.teacher == "pdm"
+    with pytest.raises(ValueError, match=r"student_drive must be in \[0, 1\], got 1.5"):
+        apply_overrides(preset_config("bc-mlp"), ["algo.student_drive=1.5"])
 
 
 def test_slim_training_states_keep_the_stop_signs():
@@ -82,3 +84,19 @@ def test_slim_training_states_keep_the_stop_signs():
     assert kept.valid.sum() == 2 and (kept.types[kept.valid] == RG_STOP_SIGN).all()
     np.testing.assert_array_equal(kept.x[:2], np.asarray(rg.x)[[5, 17]])
     assert jnp.asarray(kept.valid[2:]).sum() == 0
+
+
+def test_bc_drives_with_the_noisy_expert_or_on_its_share_of_rows_the_student():
+    from vmax_sim.training.loop import bc_behaviour_action
+
+    expert, student = jnp.full((400, 2), 0.5), jnp.full((400, 2), -0.25)
+    key = jax.random.PRNGKey(3)
+    noisy = np.asarray(bc_behaviour_action(expert, None, key, 0.1, 0.0, jnp.array(True)))
+    assert 0.08 < noisy.std() < 0.12 and abs(noisy.mean() - 0.5) < 0.02  # DART: the expert's action, noisy
+    half = np.asarray(bc_behaviour_action(expert, student, key, 0.0, 0.5, jnp.array(True)))
+    by_student = (half == -0.25).all(axis=1)
+    assert ((half == 0.5).all(axis=1) | by_student).all()  # whole rows: the student's or the expert's
+    assert 0.4 < by_student.mean() < 0.6
+    np.testing.assert_array_equal(bc_behaviour_action(expert, student, key, 0.0, 1.0, jnp.array(True)), student)
+    # before algo.student_after env steps the expert drives every row
+    np.testing.assert_array_equal(bc_behaviour_action(expert, student, key, 0.0, 1.0, jnp.array(False)), expert)

@@ -81,6 +81,20 @@ def _updates(learner: Learner, learner_state, buffer: TransitionReplay, key: jax
     return state, jax.tree.map(jnp.mean, metrics)
 
 
+def bc_behaviour_action(expert: jax.Array, student: jax.Array | None, key: jax.Array, noise: float,
+                        student_drive: float, student_started: jax.Array) -> jax.Array:
+    """The action BC drives with, per row: the expert's plus Gaussian noise (DART: visits states off the expert's
+    path, where its closed-loop labels steer back), or on a `student_drive` share of the rows (once
+    `student_started`) the student's own (DAgger: the states the student drives into, labelled by the expert).
+    expert, student (B, A) -> (B, A)"""
+    action = expert + noise * jax.random.normal(key, expert.shape) if noise > 0 else expert
+    if student is None or student_drive <= 0:
+        return action
+    by_student = (jax.random.uniform(jax.random.fold_in(key, 1), expert.shape[:1] + (1,)) < student_drive)
+    by_student &= student_started
+    return jnp.where(by_student, student, action)
+
+
 def make_off_policy_chunk(env: LearningEnv, learner: Learner, algo: str, algo_config, chunk_steps: int,
                           metrics_template: dict) -> Callable:
     """(carry, pool) -> (carry, chunk scalars). `metrics_template`: the learner metrics' structure."""
@@ -91,12 +105,14 @@ def make_off_policy_chunk(env: LearningEnv, learner: Learner, algo: str, algo_co
         key, act_key, random_key, update_key = jax.random.split(carry.key, 4)
         obs = carry.env.observation
         if algo == "bc":
-            # behaviour cloning drives with the expert (the log-following one, or train.teacher's planner);
-            # optional Gaussian noise on the applied action (DART-style) visits states off the log, where the
-            # closed-loop expert's labels steer back
+            # behaviour cloning drives with the expert (the log-following one, or train.teacher's planner), noisy,
+            # or with the student (bc_behaviour_action)
             expert = env.expert_action(carry.env)
-            noise = getattr(algo_config, "behaviour_noise", 0.0)
-            action = expert + noise * jax.random.normal(random_key, expert.shape) if noise > 0 else expert
+            student = None
+            if algo_config.student_drive > 0:
+                student = learner.act(learner.policy_params(carry.learner), obs, act_key, True)
+            action = bc_behaviour_action(expert, student, random_key, algo_config.behaviour_noise,
+                                         algo_config.student_drive, carry.env_steps >= algo_config.student_after)
         else:
             expert = None
             policy_action = learner.act(learner.policy_params(carry.learner), obs, act_key, False)

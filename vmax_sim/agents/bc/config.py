@@ -37,10 +37,16 @@ class BCConfig:
     # std of Gaussian noise added to the expert's applied action (normalised units) while collecting; the
     # labels stay the closed-loop expert's actions at the visited states (DART-style augmentation)
     behaviour_noise: float = 0.0
+    # share of steps driven by the student's own (mean) action instead of the noisy expert's (DAgger's beta,
+    # mixed per step): the data then hold the states the student drives into, labelled by the expert
+    student_drive: float = 0.0
+    student_after: int = 20_000  # env steps before the student drives (once it has learnt something)
 
     def __post_init__(self):
         check_positive(self, "learning_rate", "num_envs", "batch_size", "updates_per_step", "unroll_length",
                        "buffer_size", "expert_action_eps")
+        if not 0.0 <= self.student_drive <= 1.0:
+            raise ValueError(f"student_drive must be in [0, 1], got {self.student_drive}")
         if self.nll_weight < 0 or self.mse_weight < 0 or self.nll_weight + self.mse_weight == 0:
             raise ValueError("nll_weight and mse_weight must be >= 0 and not both 0")
 
