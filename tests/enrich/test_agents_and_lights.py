@@ -84,3 +84,22 @@ def test_light_without_lane_or_evidence_stays_unknown():
     scenario = scenario.replace(tl_lane_id=np.full_like(scenario.tl_lane_id, -1))
     out = enrich_scenario(scenario, EnrichSettings(label_controllable=False))
     assert not out.tl_inferred.any() and out.tl_valid[0].sum() == 1
+
+
+def test_light_evidence_reads_only_rows_that_can_count():
+    """vehicle_motion keeps the vehicles valid at some step; the evidence is the one read from every object."""
+    from scenariomax.enrich.traffic_lights import Motion, light_evidence, vehicle_motion
+
+    scenario = _light_scene(logged_state=sch.TL_UNKNOWN)
+    kinds = scenario.object_type.copy()
+    kinds[::2] = sch.OBJECT_TYPE_PEDESTRIAN  # rows that never count, between rows that do
+    scenario = scenario.replace(object_type=kinds)
+    vehicles = scenario.object_type == sch.OBJECT_TYPE_VEHICLE
+    every_row = Motion(scenario.valid & vehicles[:, None], np.cos(scenario.bbox_yaw), np.sin(scenario.bbox_yaw),
+                       np.hypot(scenario.velocity_x, scenario.velocity_y), scenario.x, scenario.y)
+    assert len(vehicle_motion(scenario).x) < scenario.num_objects
+    for stop, direction in (((50.0, 0.0), (1.0, 0.0)), ((60.0, -5.0), (0.0, 1.0))):
+        got = light_evidence(scenario, np.array([*stop, 0.0]), np.array(direction))
+        want = light_evidence(scenario, np.array([*stop, 0.0]), np.array(direction), motion=every_row)
+        for g, w in zip(got, want):
+            np.testing.assert_array_equal(g, w)

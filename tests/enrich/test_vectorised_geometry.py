@@ -244,3 +244,57 @@ def test_row_norm_is_numpy_norm(dtype):
     for width in (2, 3):
         vectors = (rng.normal(size=(20, 500, width)) * 10 ** rng.uniform(-3, 3, (20, 500, 1))).astype(dtype)
         np.testing.assert_array_equal(row_norm(vectors), np.linalg.norm(vectors, axis=-1))
+
+
+def test_point_at_arc_and_slice_match_the_stacked_formulation():
+    """point_at_arc writes np.interp's columns into one array and slice_polyline interpolates both ends in one
+    call: the same bits as np.stack of the per-column interps and the vstack of two one-point calls."""
+    from scenariomax.enrich.geometry import point_at_arc, slice_polyline
+
+    rng = np.random.default_rng(8)
+    for _ in range(50):
+        line = np.cumsum(rng.normal(size=(int(rng.integers(2, 40)), 3)), 0) + rng.uniform(-1e4, 1e4, 3)
+        line[int(rng.integers(0, len(line)))] = line[0]  # a repeated point
+        cum = arc_lengths(line)
+        arcs = rng.uniform(-2.0, cum[-1] + 2.0, int(rng.integers(1, 20)))
+        want = np.stack([np.interp(arcs, cum, line[:, k]) for k in range(3)], axis=1)
+        np.testing.assert_array_equal(point_at_arc(line, cum, arcs), want)
+        start, stop = sorted(rng.uniform(0.0, cum[-1], 2))
+        if stop <= start:  # a polyline of one repeated point: the one-point branch, unchanged
+            continue
+        inner = (cum > start) & (cum < stop)
+        ends = [np.stack([np.interp([a], cum, line[:, k]) for k in range(3)], axis=1) for a in (start, stop)]
+        want = np.vstack([ends[0], line[inner], ends[1]])
+        np.testing.assert_array_equal(slice_polyline(line, cum, start, stop), want)
+
+
+@pytest.mark.parametrize("num_points", [1, 31, 400])
+def test_a_point_projects_alone_as_among_others(num_points):
+    """The path search decides a lane change from its end point alone before projecting the whole blend:
+    that relies on each point's projection not depending on the points projected with it (all-pairs and
+    pruned searches alike)."""
+    rng = np.random.default_rng(num_points)
+    line = np.cumsum(rng.normal(size=(200, 3)) + [1.0, 0.0, 0.0], 0) + rng.uniform(-1e4, 1e4, 3)
+    line = np.vstack([line, line[::-1][1:60]])  # back over itself: ties
+    points = line[rng.integers(0, len(line), num_points), :2] + rng.normal(size=(num_points, 2)) * 3.0
+    together = project_to_polyline(points, line)
+    for j in rng.choice(num_points, min(num_points, 25), replace=False):
+        alone = project_to_polyline(points[j:j + 1], line)
+        for got, want in zip(alone, together):
+            np.testing.assert_array_equal(got[0], want[j])
+
+
+def test_pair_keys_order_as_the_rows_do():
+    """The lane graph's np.unique on a * K + b keys gives np.unique(axis=0)'s order, first occurrences,
+    inverse and counts for pairs of ints in [0, K)."""
+    rng = np.random.default_rng(9)
+    for num in (1, 7, 300):
+        a, b = rng.integers(0, num, 500), rng.integers(0, num, 500)
+        rows, first, inverse, counts = np.unique(np.stack([a, b], 1), axis=0, return_index=True,
+                                                 return_inverse=True, return_counts=True)
+        keys, key_first, key_inverse, key_counts = np.unique(a * num + b, return_index=True, return_inverse=True,
+                                                             return_counts=True)
+        np.testing.assert_array_equal(np.stack([keys // num, keys % num], 1), rows)
+        np.testing.assert_array_equal(key_first, first)
+        np.testing.assert_array_equal(key_inverse.reshape(-1), inverse.reshape(-1))
+        np.testing.assert_array_equal(key_counts, counts)
