@@ -284,6 +284,9 @@ def run_starts(counts: np.ndarray) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64) if len(counts) else counts
 
 
+_FEW_RUNS = 16  # up to this many runs, run_cumsum loops over them (e.g. the path candidates of one search)
+
+
 def run_cumsum(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """np.cumsum within each run, bit for bit (a run's sum never carries the previous run's rounding).
     values (n,) back to back, counts (R,) summing to n -> (n,)"""
@@ -291,6 +294,12 @@ def run_cumsum(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
     counts = np.asarray(counts, np.int64)
     out = np.empty_like(values)
     if len(values) == 0:
+        return out
+    if len(counts) <= _FEW_RUNS:  # one np.cumsum per run costs less than building the tables below
+        begin = 0
+        for count in counts.tolist():
+            np.cumsum(values[begin:begin + count], out=out[begin:begin + count])
+            begin += count
         return out
     place = np.arange(len(values)) - np.repeat(run_starts(counts), counts)  # (n,) position in its run
     run = np.repeat(np.arange(len(counts)), counts)  # (n,)
