@@ -65,6 +65,9 @@ class LoopConfig:
     eval_batch_size: int = 25
     checkpoint_every: int = 20_000  # env steps between checkpoints (one is always written at the end)
     keep_checkpoints: int = 2
+    # also keep the checkpoint of the best held-out V-Max score so far in RUN/best/ (a run directory of its own:
+    # `vmax-sim evaluate --policy RUN/best`); a policy's score swings between checkpoints (docs/learning.md)
+    keep_best: bool = True
     save_buffer: bool = True  # the replay buffer travels in checkpoints (exact resume of off-policy runs)
     buffer_dtype: str = "float16"  # storage of floating-point observation leaves in the replay buffer
     # simulator steps each policy action is held for during training (one transition, rewards summed);

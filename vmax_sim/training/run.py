@@ -44,6 +44,7 @@ from vmax_sim.networks import make_encoder
 from vmax_sim.policies.teacher import idm_teacher, pdm_teacher
 from vmax_sim.policies.traffic import idm_traffic
 from vmax_sim.training import distributed
+from vmax_sim.training.best import BestCheckpoint
 from vmax_sim.training.checkpoint import CheckpointStore
 from vmax_sim.training.config import (
     TrainConfig,
@@ -576,6 +577,7 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
         print_fn(f"train.total_env_steps={loop.total_env_steps:,} runs as {target:,} env steps (whole chunks of "
                  f"{per_chunk:,})")
     bar = _Progress(target, env_steps, progress)
+    best = BestCheckpoint(run_dir) if loop.keep_best else None
     wall_before = float(host["wall_s"])
     budget_s = loop.max_wall_minutes * 60.0 if loop.max_wall_minutes else math.inf
     start = time.perf_counter()
@@ -620,8 +622,11 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
                 # evaluations and checkpoints free a lot at once: return it (and what the chunks left) to the system
                 if loop.eval_every and env_steps - last_eval >= loop.eval_every and not last_chunk:
                     release_freed_memory()
-                    evaluator.run(distributed.local_copy(learner.policy_params(carry.learner)), env_steps,
-                                  scalars["wall_s"])
+                    summary = evaluator.run(distributed.local_copy(learner.policy_params(carry.learner)), env_steps,
+                                            scalars["wall_s"])
+                    if best is not None:
+                        best.offer(env_steps, summary, carry, {"consumed": stream.consumed, "wall_s": scalars["wall_s"],
+                                                               "chunks": int(host["chunks"]) + chunks})
                     last_eval = env_steps
                     release_freed_memory()
                 if env_steps - last_checkpoint >= loop.checkpoint_every or last_chunk:
@@ -656,6 +661,11 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
     release_freed_memory()
     if finished:
         final = evaluator.run(distributed.local_copy(learner.policy_params(carry.learner)), env_steps, wall_s)
+        if best is not None:
+            best.offer(env_steps, final, carry, {"consumed": stream.consumed, "wall_s": wall_s,
+                                                 "chunks": int(host["chunks"]) + chunks})
+            print_fn(f"best held-out V-Max score {best.score:.3f}: its checkpoint is in {best.directory} "
+                     f"(vmax-sim evaluate --policy {best.directory})")
         if primary:
             evaluator.plot(run_dir / "learning_curve.png", logger.rows)
     logger.close()
