@@ -89,8 +89,14 @@ class _Prefixed:
 
     def __init__(self, prefix: bytes, stream: BinaryIO):
         self._prefix, self._stream = prefix, stream
+        self.position = 0  # bytes of the file handed out so far (where gzip damage is reported)
 
     def read(self, size: int = -1) -> bytes:
+        data = self._read(size)
+        self.position += len(data)
+        return data
+
+    def _read(self, size: int) -> bytes:
         if not self._prefix:
             return self._stream.read(size)
         if size is None or size < 0:
@@ -103,7 +109,8 @@ class _Prefixed:
 class _Gunzipped:
     """The decompressed bytes of a gzip stream (any number of members); damage is a RecordError naming the file."""
 
-    def __init__(self, stream, name: str):
+    def __init__(self, stream: _Prefixed, name: str):
+        self._stream = stream
         self._file = gzip.GzipFile(fileobj=stream, mode="rb")
         self._name = name
 
@@ -111,9 +118,10 @@ class _Gunzipped:
         try:
             return self._file.read(size)
         except EOFError:
-            raise _record_error(self._name, "truncated gzip data (the file ends inside a compressed record)") from None
+            raise _record_error(self._name, f"truncated gzip data (the file ends at byte {self._stream.position}, "
+                                            "inside a compressed record)") from None
         except (gzip.BadGzipFile, zlib.error) as error:
-            raise _record_error(self._name, f"damaged gzip data ({error})") from None
+            raise _record_error(self._name, f"damaged gzip data before byte {self._stream.position} ({error})") from None
 
 
 def decompressed(stream: BinaryIO, name: str) -> BinaryIO | _Gunzipped:

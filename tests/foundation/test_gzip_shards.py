@@ -111,7 +111,8 @@ def test_a_truncated_or_corrupted_gzip_shard_is_one_line_naming_the_file(outputs
     cut.write_bytes(data[:len(data) - 100])
     with pytest.raises(ShardReadError) as error:
         list(read_shards(cut))
-    assert str(error.value) == f"{cut}: truncated gzip data (the file ends inside a compressed record)"
+    assert str(error.value) == (f"{cut}: truncated gzip data (the file ends at byte {len(data) - 100}, inside a "
+                                "compressed record)")
     with pytest.raises(ShardReadError, match=f"^{cut}: truncated record at byte \\d+"):
         list(iter_shard_records(cut))
     flipped = tmp_path / "flipped.tfrecord"

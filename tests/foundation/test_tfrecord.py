@@ -3,7 +3,7 @@ import struct
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from scenariomax.io.tfrecord import (
@@ -59,6 +59,7 @@ def test_flipped_data_byte_is_a_crc_error(tmp_path):
 
 
 @settings(max_examples=30, deadline=None)
+@example(cut=0, flip=0, mode="garbage", garbage=b"\x1f\x8b")  # the gzip magic alone: truncated gzip, at byte 2
 @given(cut=st.integers(min_value=0, max_value=200), flip=st.integers(min_value=0, max_value=10_000),
        mode=st.sampled_from(["truncate", "flip", "garbage"]), garbage=st.binary(max_size=64))
 def test_damaged_bytes_give_a_clean_error(tmp_path_factory, cut, flip, mode, garbage):
