@@ -247,13 +247,11 @@ def project_to_polylines(points: np.ndarray, polylines: list[np.ndarray]) -> lis
 def point_at_arc(polyline: np.ndarray, cum: np.ndarray, arcs: np.ndarray) -> np.ndarray:
     """Points at the given arc lengths (linear interpolation per coordinate). -> (m, d)"""
     arcs = np.asarray(arcs, np.float64)
-    if arcs.ndim != 1:
-        return np.stack([np.interp(arcs, cum, polyline[:, k]) for k in range(polyline.shape[1])], axis=1)
     # Columns written into one array: np.stack costs more than the interpolation on the short inputs of the
     # path search (hundreds of calls per scenario); the values are np.interp's either way.
-    out = np.empty((len(arcs), polyline.shape[1]))
+    out = np.empty(arcs.shape + polyline.shape[1:])
     for k in range(polyline.shape[1]):
-        out[:, k] = np.interp(arcs, cum, polyline[:, k])
+        out[..., k] = np.interp(arcs, cum, polyline[:, k])
     return out
 
 

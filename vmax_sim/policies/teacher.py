@@ -8,7 +8,8 @@ closed loop, at every state the student visits (DART / DAgger-style), and it is 
 student is measured against on real roads.
 
 `LearningEnv(teacher=pdm_teacher)` calls the factory with its core Environment (normalised actions) and
-labels every step with the returned function's action. Jittable, one unbatched state.
+labels every step with the returned function's action. The teachers are the evaluation's own rule policies
+(`idm_policy`, `pdm_policy`), read at the SDC's slot. Jittable, one unbatched state.
 """
 
 from __future__ import annotations
@@ -19,19 +20,18 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.datatypes import SimulatorState
+from vmax_sim.env.metrics_adapter import sdc_index
+from vmax_sim.policies.base import Policy
 
 TeacherFn = Callable[[SimulatorState], jax.Array]  # one unbatched state -> the SDC's action (A,) in [-1, 1]
 
 
-def planner_teacher(env, name: str, plan_fn: Callable[[SimulatorState, int], jax.Array]) -> TeacherFn:
-    """A teacher from plan_fn(state, first_timestep) -> the SDC's physical (2,) bicycle action."""
-    from vmax_sim.policies.idm import check_bicycle
-
-    check_bicycle(env, f"{name} teacher's")
-    first = env.config.first_policy_timestep
+def policy_teacher(policy: Policy) -> TeacherFn:
+    """The SDC's action of a rule-based policy (no parameters, no observation, no randomness), clipped to [-1, 1]
+    (the env the policy was built for must normalise its actions, as LearningEnv's core does)."""
 
     def teach(state: SimulatorState) -> jax.Array:
-        action = env.dynamics.normalize(plan_fn(state, first))
+        action = policy.action_fn(None, state, None, None).data[sdc_index(state)]
         return jnp.clip(action, -1.0, 1.0).astype(jnp.float32)
 
     return teach
@@ -39,18 +39,16 @@ def planner_teacher(env, name: str, plan_fn: Callable[[SimulatorState, int], jax
 
 def idm_teacher(env) -> TeacherFn:
     """IDM + pure pursuit along the SDC's route, at the lane's speed limit (the evaluation's IDM)."""
-    from vmax_sim.policies.idm import IDMConfig, idm_action
+    from vmax_sim.policies.idm import idm_policy
 
-    config = IDMConfig()
-    return planner_teacher(env, "idm", lambda state, first: idm_action(state, config, first))
+    return policy_teacher(idm_policy(env))
 
 
 def pdm_teacher(env) -> TeacherFn:
     """PDM-Closed (the evaluation's): 15 IDM proposals scored by a forecast of the others."""
-    from vmax_sim.policies.pdm import PDMConfig, pdm_action
+    from vmax_sim.policies.pdm import pdm_policy
 
-    config = PDMConfig()
-    return planner_teacher(env, "pdm", lambda state, first: pdm_action(state, config, first))
+    return policy_teacher(pdm_policy(env))
 
 
-__all__ = ["TeacherFn", "idm_teacher", "pdm_teacher", "planner_teacher"]
+__all__ = ["TeacherFn", "idm_teacher", "pdm_teacher", "policy_teacher"]

@@ -37,14 +37,16 @@ class BestCheckpoint:
         self.run_dir = Path(run_dir)
         self.directory = self.run_dir / BEST_DIR
         self.score = best_score(self.directory)
+        self._store: CheckpointStore | None = None  # opened at the first checkpoint kept
 
     def offer(self, env_steps: int, summary: dict, carry, host: dict) -> bool:
         """Writes `carry` (its replay buffer left out) when `summary`'s V-Max score beats the best so far. -> kept"""
         score = float(summary["vmax_score"])
         if not distributed.any_process([score > self.score])[0]:
             return False
-        store = CheckpointStore(self.directory / "checkpoints", keep=1)
-        store.save(env_steps, carry.replace(buffer=None), host, with_buffer=False)
+        if self._store is None:
+            self._store = CheckpointStore(self.directory / "checkpoints", keep=1)
+        self._store.save(env_steps, carry.replace(buffer=None), host, with_buffer=False)
         if distributed.is_primary():
             shutil.copyfile(self.run_dir / "config.json", self.directory / "config.json")
             record = {"env_steps": int(env_steps), "vmax_score": score, "accuracy": float(summary["accuracy"]),

@@ -579,6 +579,10 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
     bar = _Progress(target, env_steps, progress)
     best = BestCheckpoint(run_dir) if loop.keep_best else None
     wall_before = float(host["wall_s"])
+
+    def host_record(wall_s: float) -> dict:  # what a checkpoint keeps of the host side
+        return {"consumed": stream.consumed, "wall_s": wall_s, "chunks": int(host["chunks"]) + chunks}
+
     budget_s = loop.max_wall_minutes * 60.0 if loop.max_wall_minutes else math.inf
     start = time.perf_counter()
     last_checkpoint = env_steps
@@ -625,15 +629,12 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
                     summary = evaluator.run(distributed.local_copy(learner.policy_params(carry.learner)), env_steps,
                                             scalars["wall_s"])
                     if best is not None:
-                        best.offer(env_steps, summary, carry, {"consumed": stream.consumed, "wall_s": scalars["wall_s"],
-                                                               "chunks": int(host["chunks"]) + chunks})
+                        best.offer(env_steps, summary, carry, host_record(scalars["wall_s"]))
                     last_eval = env_steps
                     release_freed_memory()
                 if env_steps - last_checkpoint >= loop.checkpoint_every or last_chunk:
                     release_freed_memory()
-                    store.save(env_steps, carry, {"consumed": stream.consumed, "wall_s": scalars["wall_s"],
-                                                  "chunks": int(host["chunks"]) + chunks},
-                               with_buffer=loop.save_buffer)
+                    store.save(env_steps, carry, host_record(scalars["wall_s"]), with_buffer=loop.save_buffer)
                     last_checkpoint = env_steps
                     release_freed_memory()
                 if last_chunk and stopped != "total_env_steps":
@@ -647,8 +648,7 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
             logger.flush()
     wall_s = wall_before + time.perf_counter() - start
     if stopped == "max_wall_minutes" and last_checkpoint != env_steps:  # the budget ran out before the first chunk
-        store.save(env_steps, carry, {"consumed": stream.consumed, "wall_s": wall_s,
-                                      "chunks": int(host["chunks"]) + chunks}, with_buffer=loop.save_buffer)
+        store.save(env_steps, carry, host_record(wall_s), with_buffer=loop.save_buffer)
     finished = env_steps >= loop.total_env_steps or stopped == "max_wall_minutes"
     if stopped == "max_wall_minutes":
         print_fn(f"stopped at the wall-clock budget (train.max_wall_minutes={loop.max_wall_minutes:g}) after "
@@ -662,8 +662,7 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
     if finished:
         final = evaluator.run(distributed.local_copy(learner.policy_params(carry.learner)), env_steps, wall_s)
         if best is not None:
-            best.offer(env_steps, final, carry, {"consumed": stream.consumed, "wall_s": wall_s,
-                                                 "chunks": int(host["chunks"]) + chunks})
+            best.offer(env_steps, final, carry, host_record(wall_s))
             print_fn(f"best held-out V-Max score {best.score:.3f}: its checkpoint is in {best.directory} "
                      f"(vmax-sim evaluate --policy {best.directory})")
         if primary:
