@@ -60,6 +60,35 @@ def test_bc_learns_the_toy_expert():
     assert closed_loop > -0.5  # the expert scores about -0.1, a random policy about -23
 
 
+def test_bc_moving_average_is_the_policy_that_acts():
+    from vmax_sim.agents.bc.learner import ema_weight
+    config = get_config("bc", "debug", learning_rate=1e-3, ema_decay=0.99)
+    learner = make_learner("bc", config, lambda: toy.ToyEncoder(32), toy.ACTION_DIM)
+    state = learner.init(jax.random.key(0), toy.observe(toy.reset(jax.random.key(0), 2)))
+    np.testing.assert_allclose(float(ema_weight(jnp.int32(0), 0.99)), 0.9, rtol=1e-6)  # leaves the init at once
+    np.testing.assert_allclose(float(ema_weight(jnp.int32(10_000), 0.99)), 0.01, rtol=1e-6)
+    update = jax.jit(learner.update)
+    raw_first = None
+    for i in range(300):
+        state, _ = update(state, toy.random_batch(jax.random.key(i), 128), jax.random.key(i))
+        if i == 0:
+            raw_first = state.policy_params
+    leaves = jax.tree.leaves
+    # the acting parameters are the average, not the last step's, and the average follows the steps
+    assert all(bool(jnp.all(a == b)) for a, b in zip(leaves(learner.policy_params(state)), leaves(state.ema_params)))
+    assert any(bool(jnp.any(a != b)) for a, b in zip(leaves(state.ema_params), leaves(state.policy_params)))
+    assert any(bool(jnp.any(a != b)) for a, b in zip(leaves(state.ema_params), leaves(raw_first)))
+    held_out = toy.random_batch(jax.random.key(5), 1000)
+    action = learner.act(learner.policy_params(state), held_out.obs, jax.random.key(0), True)
+    assert float(jnp.mean(jnp.abs(action - held_out.expert_action))) < 0.1
+    # without a decay there is no average and the raw parameters act
+    plain = make_learner("bc", get_config("bc", "debug"), lambda: toy.ToyEncoder(32), toy.ACTION_DIM)
+    plain_state = plain.init(jax.random.key(0), toy.observe(toy.reset(jax.random.key(0), 2)))
+    assert plain_state.ema_params is None and plain.policy_params(plain_state) is plain_state.policy_params
+    with pytest.raises(ValueError, match="ema_decay"):
+        get_config("bc", "debug", ema_decay=1.0)
+
+
 def test_bc_sac_schedule():
     steps = jnp.arange(6)
     np.testing.assert_allclose(jax.vmap(lambda s: bc_weight_at(s, 2, 0.7))(steps), [0.7, 0, 0.7, 0, 0.7, 0],

@@ -23,6 +23,10 @@ class BCConfig:
     nll_weight: float = 1.0  # weight of -log pi(expert_action | s)
     mse_weight: float = 0.0  # weight of |tanh(loc) - expert_action|^2 (optional anchor of the mode)
     expert_action_eps: float = 1e-3  # expert actions clipped to [-1 + eps, 1 - eps] before atanh
+    # decay of an exponential moving average of the policy parameters, updated after every gradient step; when
+    # > 0 the average is the policy that acts, is evaluated and is saved (0: the raw parameters). Small-batch
+    # steps move a closed-loop driver between checkpoints; the average keeps what the recent steps agree on
+    ema_decay: float = 0.0
     # network
     policy_hidden_sizes: tuple[int, ...] = (256, 64, 32)
     activation: str = "relu"
@@ -45,6 +49,8 @@ class BCConfig:
     def __post_init__(self):
         check_positive(self, "learning_rate", "num_envs", "batch_size", "updates_per_step", "unroll_length",
                        "buffer_size", "expert_action_eps")
+        if not 0.0 <= self.ema_decay < 1.0:
+            raise ValueError(f"ema_decay must be in [0, 1), got {self.ema_decay}")
         if not 0.0 <= self.student_drive <= 1.0:
             raise ValueError(f"student_drive must be in [0, 1], got {self.student_drive}")
         if self.nll_weight < 0 or self.mse_weight < 0 or self.nll_weight + self.mse_weight == 0:

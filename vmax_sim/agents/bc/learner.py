@@ -1,6 +1,7 @@
 """Behaviour cloning learner: `make_learner(config, encoder_factory, action_dim) -> Learner`.
 
-One `update` is one Adam step on `bc_loss` over a batch of Transitions (obs, expert_action used).
+One `update` is one Adam step on `bc_loss` over a batch of Transitions (obs, expert_action used), then (when
+`config.ema_decay` > 0) one step of the parameters' moving average, which is then the policy that acts.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import optax
 from vmax_sim.agents.bc.config import BCConfig
 from vmax_sim.agents.bc.losses import bc_loss
 from vmax_sim.agents.bc.networks import make_networks
-from vmax_sim.agents.common import apply_gradients, global_norm, make_optimizer, scalar
+from vmax_sim.agents.common import apply_gradients, global_norm, make_optimizer, polyak_update, scalar
 from vmax_sim.agents.networks import EncoderFactory
 from vmax_sim.agents.policy import make_act_fns
 from vmax_sim.agents.types import Learner, Metrics, Params, Transition
@@ -24,6 +25,15 @@ class BCTrainState:
     policy_params: Params
     opt_state: optax.OptState
     step: jax.Array  # () int32, updates done
+    ema_params: Params | None = None  # moving average of policy_params (None when config.ema_decay == 0)
+
+
+def ema_weight(step: jax.Array, decay: float) -> jax.Array:
+    """The share of the new parameters in the average after update `step` (0-based): 1 - decay, but larger for
+    the first updates (1 - (1 + step) / (10 + step) while that is larger) so the average soon leaves the random
+    initialisation instead of carrying it for 1 / (1 - decay) updates."""
+    warm = 1.0 - (1.0 + step) / (10.0 + step)
+    return jnp.maximum(1.0 - decay, warm.astype(jnp.float32))
 
 
 def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: int) -> Learner:
@@ -32,7 +42,8 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
 
     def init(key: jax.Array, obs_example) -> BCTrainState:
         params = actor.init(key, obs_example)
-        return BCTrainState(policy_params=params, opt_state=optimizer.init(params), step=jnp.zeros((), jnp.int32))
+        return BCTrainState(policy_params=params, opt_state=optimizer.init(params), step=jnp.zeros((), jnp.int32),
+                            ema_params=params if config.ema_decay > 0 else None)
 
     def loss_fn(params: Params, batch: Transition):
         return bc_loss(actor.apply(params, batch.obs), batch.expert_action, config.nll_weight, config.mse_weight,
@@ -43,8 +54,14 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
         (_, metrics), grads = jax.value_and_grad(loss_fn, has_aux=True)(state.policy_params, batch)
         params, opt_state = apply_gradients(optimizer, grads, state.opt_state, state.policy_params)
         metrics = {**metrics, "grad_norm": scalar(global_norm(grads))}
-        return BCTrainState(policy_params=params, opt_state=opt_state, step=state.step + 1), metrics
+        ema = state.ema_params
+        if config.ema_decay > 0:
+            ema = polyak_update(params, ema, ema_weight(state.step, config.ema_decay))
+        return BCTrainState(policy_params=params, opt_state=opt_state, step=state.step + 1, ema_params=ema), metrics
+
+    def acting_params(state: BCTrainState) -> Params:
+        return state.ema_params if config.ema_decay > 0 else state.policy_params
 
     act, act_with_info = make_act_fns(actor.apply)
-    return Learner(init=init, update=update, act=act, policy_params=lambda state: state.policy_params,
-                   act_with_info=act_with_info, value=None)
+    return Learner(init=init, update=update, act=act, policy_params=acting_params, act_with_info=act_with_info,
+                   value=None)
