@@ -42,16 +42,21 @@ def generate_scenario(seed: int, index: int, sizes: Sizes | None = None, topolog
     for _ in range(MAX_ATTEMPTS):
         network = build_network(rng, topology, knobs)
         traffic = simulate(network, rng, sizes.num_timesteps, knobs)
-        sdc = _choose_sdc(network, traffic, rng, sizes)
+        sdc = _choose_sdc(network, traffic, rng, sizes, knobs)
         if sdc is not None:
             scenario = _assemble(scenario_id(seed, index), network, traffic, sdc, sizes)
             return fit_to_budget(_tracking_noise(scenario, rng, knobs), sizes)
     raise GenerationError(f"{scenario_id(seed, index)}: no vehicle fit to be the SDC in {MAX_ATTEMPTS} attempts")
 
 
-def _choose_sdc(network: RoadNetwork, traffic: Traffic, rng: np.random.Generator, sizes: Sizes) -> int | None:
+SLOW_START_MPS = 2.0  # `sdc_slow_start`: a candidate this slow at the current step starts nearly at rest
+
+
+def _choose_sdc(network: RoadNetwork, traffic: Traffic, rng: np.random.Generator, sizes: Sizes,
+                knobs: SyntheticKnobs = DEFAULT_KNOBS) -> int | None:
     """A car valid at every step that moves, never passes a red stop point and, where the map
-    has junction or merge lanes, drives through one during the episode."""
+    has junction or merge lanes, drives through one during the episode; with the `sdc_slow_start` knob's
+    chance, one of those nearly at rest at the current step (when there is one)."""
     is_car = (traffic.object_type == OBJECT_TYPE_VEHICLE) & ~traffic.is_parked & (traffic.length < 5.5)
     candidates = np.flatnonzero(is_car & traffic.valid.all(axis=1) & (traffic.speed.max(axis=1) > 3.0))
     if len(candidates) == 0:
@@ -63,6 +68,9 @@ def _choose_sdc(network: RoadNetwork, traffic: Traffic, rng: np.random.Generator
         return None
     through = [c for c in clean if any(step >= 1 for _, step in traffic.gates_entered[c])]
     pool = through or clean
+    if knobs.sdc_slow_start > 0 and rng.random() < knobs.sdc_slow_start:
+        slow = [c for c in clean if traffic.speed[c, sizes.current_time_index] < SLOW_START_MPS]
+        pool = [c for c in slow if c in through] or slow or pool
     return int(pool[int(rng.integers(len(pool)))])
 
 

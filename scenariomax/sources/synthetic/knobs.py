@@ -1,5 +1,5 @@
 """`SyntheticKnobs`: randomisation knobs of the synthetic generator (traffic density, tracking noise, lane
-widths, speed limits, driver styles, parked cars, topology mix).
+widths, speed limits, driver styles, parked cars and where they park, how the SDC starts, topology mix).
 
 The defaults reproduce the generator exactly (same arrays, same random stream), so a source or a cache made
 with default knobs is the one made before the knobs existed. Every knob widens or shifts a draw the
@@ -30,6 +30,15 @@ class SyntheticKnobs:
     speed_limit_scale: float = 1.0  # x every lane's speed limit
     driver_style_spread: float = 1.0  # x spread of driver traits around their centres (>1 more varied)
     parked_fraction: tuple[float, float] = (0.15, 0.5)  # range of the share of parking spots taken
+    # the most parked cars in a scene: 14 (the default) keeps the first taken spots in road order, as the generator
+    # always did; any other value keeps that many taken spots drawn at random along every strip
+    max_parked: int = 14
+    # chance that each side of each junction arm has a kerbside parking strip (real streets are lined with
+    # parked cars up to the junction; the generator's junctions had none)
+    junction_parking: float = 0.0
+    # chance that the SDC is chosen among the candidates nearly at rest (< 2 m/s) at the current step, when there
+    # are any (a queue or a light about to turn; a quarter to a half of real WOMD / nuScenes scenes start so)
+    sdc_slow_start: float = 0.0
     topology_weights: str = ""  # "intersection4:2,merge:1": relative weights (others 0); "" the default mix
 
     def __post_init__(self) -> None:
@@ -41,6 +50,8 @@ class SyntheticKnobs:
                 object.__setattr__(self, field.name, _coerce(field.name, value, default))
             elif isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
                 object.__setattr__(self, field.name, float(value))
+            elif isinstance(default, int) and isinstance(value, float) and value.is_integer():
+                object.__setattr__(self, field.name, int(value))
         _check_number("traffic_density", self.traffic_density, 0.0, 10.0, low_open=True)
         _check_number("position_noise_m", self.position_noise_m, 0.0, 5.0)
         _check_number("heading_noise_rad", self.heading_noise_rad, 0.0, 1.0)
@@ -48,6 +59,10 @@ class SyntheticKnobs:
         _check_number("speed_limit_scale", self.speed_limit_scale, 0.5, 2.0)
         _check_number("driver_style_spread", self.driver_style_spread, 0.0, 3.0)
         _check_range("parked_fraction", self.parked_fraction, 0.0, 1.0)
+        if isinstance(self.max_parked, bool) or not isinstance(self.max_parked, int) or not 0 <= self.max_parked <= 48:
+            raise ValueError(f"synthetic knob max_parked: expected a whole number from 0 to 48, got {self.max_parked!r}")
+        _check_number("junction_parking", self.junction_parking, 0.0, 1.0)
+        _check_number("sdc_slow_start", self.sdc_slow_start, 0.0, 1.0)
         if not isinstance(self.topology_weights, str):
             raise ValueError(f"synthetic knob topology_weights: expected text like 'intersection4:2,merge:1', "
                              f"got {self.topology_weights!r}")
@@ -153,14 +168,19 @@ def _coerce(name: str, value, default):
                     parts = parts * 2
                 value = parts
             return tuple(float(v) for v in value)
+        if isinstance(value, bool):
+            raise ValueError
         if isinstance(default, float):
-            if isinstance(value, bool):
-                raise ValueError
             return float(value)
+        if isinstance(default, int):
+            number = float(value)
+            if not number.is_integer():
+                raise ValueError
+            return int(number)
         return str(value)
     except (TypeError, ValueError):
         kind = "lo:hi (two numbers)" if isinstance(default, tuple) else "a number" if isinstance(default, float) \
-            else "text"
+            else "a whole number" if isinstance(default, int) else "text"
         raise ValueError(f"synthetic knob {name}: expected {kind}, got {value!r}") from None
 
 

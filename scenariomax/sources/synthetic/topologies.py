@@ -139,7 +139,11 @@ def _junction(rng: np.random.Generator, topology: str, arm_angles: list[float], 
         u, normal = geo.unit(angle), geo.left_normal(geo.unit(angle))
         length = float(rng.uniform(110.0, 150.0))
         ref = geo.segment(u * stop_at, u * (stop_at + length))
-        outgoing, incoming = _road(b, ref, num, num, width, speed, RG_LANE_SURFACE_STREET)
+        # kerbside parking on the arm (its first spots are 13 m past the stop line): drawn only when the knob is
+        # on, so the default generator's random stream is unchanged
+        parking = (bool(rng.random() < knobs.junction_parking), bool(rng.random() < knobs.junction_parking)) \
+            if knobs.junction_parking > 0 else (False, False)
+        outgoing, incoming = _road(b, ref, num, num, width, speed, RG_LANE_SURFACE_STREET, rng, parking=parking)
         half = num * width
         b.add_area(Polygon([normal * half, normal * half + u * (stop_at + 0.5),
                             -normal * half + u * (stop_at + 0.5), -normal * half]))

@@ -404,7 +404,14 @@ def simulate(network: RoadNetwork, rng: np.random.Generator, num_steps: int = 91
 
 def _park(network: RoadNetwork, rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> dict:
     spots = network.parking_spots
-    take = spots[rng.random(len(spots)) < rng.uniform(*knobs.parked_fraction)][:14] if len(spots) else spots
+    if len(spots):
+        take = spots[rng.random(len(spots)) < rng.uniform(*knobs.parked_fraction)]
+        if knobs.max_parked == DEFAULT_KNOBS.max_parked:
+            take = take[:knobs.max_parked]  # the generator's own rule: the first spots in road order
+        elif len(take) > knobs.max_parked:  # spread along every strip, not bunched at the first one's start
+            take = take[np.sort(rng.choice(len(take), knobs.max_parked, replace=False))]
+    else:
+        take = spots
     bodies = [ag.parked_body(rng) for _ in range(len(take))]
     return {"xy": take[:, :2].reshape(-1, 2), "yaw": take[:, 2].reshape(-1), "bodies": bodies}
 

@@ -173,6 +173,34 @@ def test_parked_fraction_and_driver_spread_change_the_scene():
     assert not np.array_equal(base.speed, spread.speed)
 
 
+def _static_within(scenario, radius_m: float = 30.0) -> int:
+    """Objects that never move and stand within `radius_m` of the SDC at the current step."""
+    t, sdc = scenario.current_time_index, int(np.argmax(scenario.is_sdc))
+    near = np.hypot(scenario.x[:, t] - scenario.x[sdc, t], scenario.y[:, t] - scenario.y[sdc, t]) < radius_m
+    return int((near & scenario.valid[:, t] & (scenario.speed.max(axis=1) <= 0)).sum())
+
+
+def test_junction_parking_and_max_parked_put_parked_cars_near_the_sdc():
+    def static_near(**knobs):
+        return sum(_static_within(generate_scenario(8, i, SIZES, topology="intersection4",
+                                                    knobs=SyntheticKnobs(**knobs))) for i in range(5))
+
+    # the generator's junctions have no kerbside parking (what stands still there is queued at a light)
+    assert static_near(junction_parking=1.0, max_parked=40, parked_fraction=(0.6, 0.9)) >= static_near() + 5
+    # max_parked bounds the parked cars; the default 14 keeps the first spots as before
+    straight = [generate_scenario(4, i, SIZES, topology="straight",
+                                  knobs=SyntheticKnobs(max_parked=4, parked_fraction=(0.9, 1.0))) for i in range(3)]
+    assert all(int((s.valid.all(axis=1) & (s.speed.max(axis=1) <= 0)).sum()) <= 4 + 4 for s in straight)
+
+
+def test_sdc_slow_start_chooses_sdcs_nearly_at_rest():
+    def slow_share(chance):
+        scenarios = [generate_scenario(9, i, SIZES, knobs=SyntheticKnobs(sdc_slow_start=chance)) for i in range(30)]
+        return np.mean([s.speed[0, s.current_time_index] < 2.0 for s in scenarios])
+
+    assert slow_share(1.0) >= slow_share(0.0) + 0.1
+
+
 def test_driver_style_spread_widens_the_traits_around_their_centres():
     def traits(spread):
         rng, knobs = np.random.default_rng(0), SyntheticKnobs(driver_style_spread=spread)
@@ -194,6 +222,8 @@ def test_driver_style_spread_widens_the_traits_around_their_centres():
     ({"driver_style_spread": -1.0}, "driver_style_spread"), ({"parked_fraction": (0.2, 1.5)}, "parked_fraction"),
     ({"topology_weights": "spaghetti:1"}, "topology_weights"), ({"topology_weights": "merge:0"}, "topology_weights"),
     ({"topology_weights": "merge:x"}, "topology_weights"),
+    ({"max_parked": 2.5}, "max_parked"), ({"max_parked": 99}, "max_parked"), ({"max_parked": True}, "max_parked"),
+    ({"junction_parking": 1.5}, "junction_parking"), ({"sdc_slow_start": -0.1}, "sdc_slow_start"),
 ])
 def test_bad_knobs_raise_one_line_naming_the_knob(kwargs, name):
     with pytest.raises(ValueError, match=name) as caught:
@@ -267,6 +297,7 @@ def test_convert_command_rejects_bad_knobs_in_one_line(tmp_path, args, words):
     SyntheticKnobs(lane_width_m=(2.7, 2.8), traffic_density=3.0),
     SyntheticKnobs(speed_limit_scale=2.0, driver_style_spread=3.0),
     SyntheticKnobs(speed_limit_scale=0.5, lane_width_m=(4.5, 5.0), parked_fraction=(1.0, 1.0)),
+    SyntheticKnobs(junction_parking=1.0, max_parked=48, parked_fraction=(1.0, 1.0), sdc_slow_start=1.0),
 ])
 def test_extreme_knobs_keep_the_logs_safe(knobs):
     """At the knobs' limits vehicles still never overlap nor run a red light, and the scenarios validate."""
