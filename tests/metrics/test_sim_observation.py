@@ -153,3 +153,24 @@ def test_batched_equals_unbatched_and_no_recompiles(index):
         for a, b in zip(jax.tree_util.tree_leaves(single), jax.tree_util.tree_leaves(got)):
             np.testing.assert_allclose(b[i], a, rtol=1e-5, atol=1e-5)
     batched(indexes, jax.tree_util.tree_map(lambda x: x + 0.1 if x.dtype == jnp.float32 else x, batch))
+
+
+def test_route_selection_keeps_the_car_ahead_that_parked_cars_push_out(index):
+    # four cars parked 4.5 m to the sides of the SDC, one follower behind it, a car 30 m ahead on its route
+    objects = [(2.0, 4.5, 0.0, 0.0), (-2.0, 4.5, 0.0, 0.0), (5.0, -4.5, 0.0, 0.0), (-5.0, -4.5, 0.0, 0.0),
+               (30.0, 0.0, 0.0, 0.0), (-20.0, 0.0, 0.0, 8.0)]
+    inputs = obs_inputs(objects=objects)
+    nearest = OBSERVE(index, inputs, ObservationConfig(num_objects=3, num_history=K))
+    route = OBSERVE(index, inputs, ObservationConfig(num_objects=3, num_history=K, object_selection="route"))
+    ahead_x = 30.0 / 50.0
+    assert not np.any(np.isclose(np.asarray(nearest.objects[:, -1, 0]), ahead_x))  # the nearest three are parked
+    np.testing.assert_allclose(route.objects[0, -1, :2], [ahead_x, 0.0], atol=1e-5)  # on the route: first
+    np.testing.assert_allclose(route.objects[1:, -1, :2], nearest.objects[:2, -1, :2], atol=1e-5)  # then nearest
+    # with room for everyone both choose the same objects
+    wide = [OBSERVE(index, inputs, ObservationConfig(num_objects=8, num_history=K, object_selection=choice))
+            for choice in ("nearest", "route")]
+    as_set = [sorted(map(tuple, np.round(np.asarray(o.objects[:, -1, :2])[np.asarray(o.objects_valid[:, -1])], 4)))
+              for o in wide]
+    assert as_set[0] == as_set[1] and len(as_set[0]) == 6
+    with pytest.raises(ValueError, match="object_selection"):
+        ObservationConfig(object_selection="closest")

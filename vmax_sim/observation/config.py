@@ -23,9 +23,17 @@ class NoiseConfig:
     occlusion: bool = False  # hide objects whose line of sight crosses a nearer object's box
 
 
+OBJECT_SELECTIONS = ("nearest", "route")
+
+
 @dataclasses.dataclass(frozen=True)
 class ObservationConfig:
     num_objects: int = 8  # n closest objects
+    # which objects fill the n slots: "nearest" (by distance to the SDC, the paper's) or "route" (first the
+    # objects within route_corridor_m of the SDC's route ahead, nearest first, then the nearest others). On real
+    # streets parked cars and pedestrians beside the SDC can push the car ahead out of the nearest n
+    object_selection: str = "nearest"
+    route_corridor_m: float = 3.0  # an object whose centre is this near the route polyline ahead is on it
     num_history: int = 5  # k steps of history per object (last = now)
     max_distance: float = 50.0  # m, positions are divided by it
     max_speed: float = 30.0  # m/s, velocities and speed limits are divided by it
@@ -45,6 +53,9 @@ class ObservationConfig:
     noise: NoiseConfig = NoiseConfig()
 
     def __post_init__(self):
+        if self.object_selection not in OBJECT_SELECTIONS:
+            raise ValueError(f"ObservationConfig.object_selection must be one of {OBJECT_SELECTIONS}, "
+                             f"got {self.object_selection!r}")
         if self.roadgraph_types not in ROADGRAPH_TYPE_SETS:
             raise ValueError(f"ObservationConfig.roadgraph_types must be one of {sorted(ROADGRAPH_TYPE_SETS)}, "
                              f"got {self.roadgraph_types!r}")

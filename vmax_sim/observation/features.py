@@ -15,6 +15,7 @@ from scenariomax.schema import (
 )
 from vmax_sim.geometry.boxes import boxes_overlap
 from vmax_sim.geometry.reductions import argmin_packed
+from vmax_sim.geometry.segments import point_segment_distance
 from vmax_sim.geometry.transforms import to_local_points, to_local_vectors, vector_length
 from vmax_sim.map_index.query import PathProjection, observation_points, project_on_paths
 from vmax_sim.map_index.structure import MapIndex
@@ -82,6 +83,29 @@ def nearest_objects(sdc_xy: jnp.ndarray, object_xy: jnp.ndarray, valid: jnp.ndar
     k = min(num, dist.shape[0])
     neg, idx = jax.lax.top_k(-dist, k)
     return (jnp.pad(idx.astype(jnp.int32), (0, num - k)), jnp.pad(jnp.isfinite(neg), (0, num - k)))
+
+
+def route_first_objects(inputs: ObservationInputs, targets: jnp.ndarray, targets_valid: jnp.ndarray,
+                        config: ObservationConfig) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """The `config.num_objects` slots filled first with the valid objects within `route_corridor_m` of the route
+    ahead (the polyline from the SDC through its path targets), nearest first, then with the nearest others.
+
+    targets (T, 2) SDC-frame normalised path targets, targets_valid (T,) -> indices (n,) int32, valid (n,) bool.
+    """
+    origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
+    local = to_local_points(inputs.object_xy[:, -1], origin, origin_yaw)  # (N, 2) m
+    points = jnp.concatenate([jnp.zeros((1, 2)), targets * config.max_distance])  # (T + 1, 2) m, SDC first
+    seg_valid = jnp.concatenate([targets_valid[:1], targets_valid[:-1] & targets_valid[1:]])  # (T,)
+    to_route = point_segment_distance(local[:, None], points[None, :-1], points[None, 1:])  # (N, T)
+    on_route = jnp.any((to_route <= config.route_corridor_m) & seg_valid[None], axis=1)  # (N,)
+    dist = vector_length(local)
+    valid = inputs.object_valid[:, -1]
+    # on-route objects rank before every other (distances are far below the offset); invalid ones last
+    rank = jnp.where(valid, dist - jnp.where(on_route, 1e6, 0.0), jnp.inf)
+    k = min(config.num_objects, rank.shape[0])
+    neg, idx = jax.lax.top_k(-rank, k)
+    pad = config.num_objects - k
+    return jnp.pad(idx.astype(jnp.int32), (0, pad)), jnp.pad(jnp.isfinite(neg), (0, pad))
 
 
 def object_features(inputs: ObservationInputs, indices: jnp.ndarray, index_valid: jnp.ndarray,
@@ -221,11 +245,15 @@ def observe(map_index: MapIndex, inputs: ObservationInputs, config: ObservationC
     """Build the observation of one scene at one step (vmap for batches).
 
     candidates (indices (n,), valid (n,)) may pass the objects already chosen for the metrics
-    (`vmax_sim.metrics.shared_queries`) so both share one selection; otherwise the n nearest.
+    (`vmax_sim.metrics.shared_queries`) so both share one selection; otherwise the n nearest (with
+    `object_selection="nearest"`; "route" always makes its own choice, `route_first_objects`).
     path_projection may pass the SDC's projection on the paths the metrics computed.
     key drives the optional perception noise.
     """
-    if candidates is None:
+    targets, targets_valid = path_targets(inputs, config, path_projection)
+    if config.object_selection == "route":  # its own choice: the metrics' candidates are the nearest
+        candidates = route_first_objects(inputs, targets, targets_valid, config)
+    elif candidates is None:
         candidates = nearest_objects(inputs.sdc_xy[-1], inputs.object_xy[:, -1], inputs.object_valid[:, -1],
                                      config.num_objects)
     indices, index_valid = candidates
@@ -238,7 +266,6 @@ def observe(map_index: MapIndex, inputs: ObservationInputs, config: ObservationC
     sdc = _heading_features(inputs.sdc_xy, inputs.sdc_vel, inputs.sdc_yaw, origin, origin_yaw, config)
     roadgraph, roadgraph_valid = roadgraph_features(map_index, origin, origin_yaw, config)
     lights, lights_valid = light_features(inputs, config)
-    targets, targets_valid = path_targets(inputs, config, path_projection)
     return Observation(sdc=jnp.where(inputs.sdc_valid[:, None], sdc, 0.0), sdc_valid=inputs.sdc_valid,
                        objects=objects, objects_valid=objects_valid, roadgraph=roadgraph,
                        roadgraph_valid=roadgraph_valid, lights=lights, lights_valid=lights_valid,
