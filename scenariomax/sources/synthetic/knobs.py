@@ -36,6 +36,9 @@ class SyntheticKnobs:
     # chance that each side of each junction arm has a kerbside parking strip (real streets are lined with
     # parked cars up to the junction; the generator's junctions had none)
     junction_parking: float = 0.0
+    # range of the pedestrians who cross at each crosswalk during a scene (a whole number drawn uniformly in it;
+    # real urban scenes have several people on foot near the SDC, the generator's about one)
+    walkers_per_crosswalk: tuple[float, float] = (0.0, 2.0)
     # chance that the SDC is chosen among the candidates nearly at rest (< 2 m/s) at the current step, when there
     # are any (a queue or a light about to turn; a quarter to a half of real WOMD / nuScenes scenes start so)
     sdc_slow_start: float = 0.0
@@ -62,6 +65,7 @@ class SyntheticKnobs:
         if isinstance(self.max_parked, bool) or not isinstance(self.max_parked, int) or not 0 <= self.max_parked <= 48:
             raise ValueError(f"synthetic knob max_parked: expected a whole number from 0 to 48, got {self.max_parked!r}")
         _check_number("junction_parking", self.junction_parking, 0.0, 1.0)
+        _check_range("walkers_per_crosswalk", self.walkers_per_crosswalk, 0.0, 12.0)
         _check_number("sdc_slow_start", self.sdc_slow_start, 0.0, 1.0)
         if not isinstance(self.topology_weights, str):
             raise ValueError(f"synthetic knob topology_weights: expected text like 'intersection4:2,merge:1', "

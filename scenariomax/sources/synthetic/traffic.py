@@ -391,7 +391,7 @@ def simulate(network: RoadNetwork, rng: np.random.Generator, num_steps: int = 91
     urban = network.topology not in ("merge",)
     parked = _park(network, rng, knobs)
     _populate(world, rng, urban, knobs)
-    _add_walkers(world, rng)
+    _add_walkers(world, rng, knobs)
     entries = [lane for lane in network.lanes if not lane.predecessors and not lane.is_gated]
     inflow = float(rng.uniform(0.015, 0.05)) * knobs.traffic_density
     for step in range(world.total_steps):
@@ -450,9 +450,10 @@ def _spawn_at_entry(world: _World, rng: np.random.Generator, lane, urban: bool,
                 lane.speed_limit * driver.speed_factor * 0.8, body, driver)
 
 
-def _add_walkers(world: _World, rng: np.random.Generator) -> None:
+def _add_walkers(world: _World, rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> None:
+    low, high = (int(round(v)) for v in knobs.walkers_per_crosswalk)
     for index, walk in enumerate(world.net.crosswalks):
-        for _ in range(int(rng.integers(0, 3))):
+        for _ in range(int(rng.integers(low, high + 1))):
             forward = rng.random() < 0.5
             start, end = (walk.start, walk.end) if forward else (walk.end, walk.start)
             side = geo.left_normal((end - start) / np.linalg.norm(end - start))

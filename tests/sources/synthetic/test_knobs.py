@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 import scenariomax
 from scenariomax.scenario import array_fields
-from scenariomax.schema import OBJECT_TYPE_VEHICLE, Sizes
+from scenariomax.schema import OBJECT_TYPE_PEDESTRIAN, OBJECT_TYPE_VEHICLE, Sizes
 from scenariomax.sources.synthetic import (
     TOPOLOGIES,
     SyntheticKnobs,
@@ -193,6 +193,17 @@ def test_junction_parking_and_max_parked_put_parked_cars_near_the_sdc():
     assert all(int((s.valid.all(axis=1) & (s.speed.max(axis=1) <= 0)).sum()) <= 4 + 4 for s in straight)
 
 
+def test_walkers_per_crosswalk_sets_how_many_cross():
+    def pedestrians(walkers):
+        knobs = SyntheticKnobs(walkers_per_crosswalk=walkers)
+        return [int(((s.object_type == OBJECT_TYPE_PEDESTRIAN) & s.valid.any(axis=1)).sum())
+                for s in (generate_scenario(3, i, SIZES, topology="intersection4", knobs=knobs) for i in range(4))]
+
+    assert pedestrians((0.0, 0.0)) == [0, 0, 0, 0]
+    crowded = pedestrians((6.0, 6.0))  # every crosswalk of the junction (up to 4) gets six
+    assert all(n >= 6 for n in crowded) and sum(crowded) > 2 * sum(pedestrians((0.0, 2.0)))
+
+
 def test_sdc_slow_start_chooses_sdcs_nearly_at_rest():
     def slow_share(chance):
         scenarios = [generate_scenario(9, i, SIZES, knobs=SyntheticKnobs(sdc_slow_start=chance)) for i in range(30)]
@@ -223,7 +234,7 @@ def test_driver_style_spread_widens_the_traits_around_their_centres():
     ({"topology_weights": "spaghetti:1"}, "topology_weights"), ({"topology_weights": "merge:0"}, "topology_weights"),
     ({"topology_weights": "merge:x"}, "topology_weights"),
     ({"max_parked": 2.5}, "max_parked"), ({"max_parked": 99}, "max_parked"), ({"max_parked": True}, "max_parked"),
-    ({"junction_parking": 1.5}, "junction_parking"), ({"sdc_slow_start": -0.1}, "sdc_slow_start"),
+    ({"junction_parking": 1.5}, "junction_parking"), ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"), ({"sdc_slow_start": -0.1}, "sdc_slow_start"),
 ])
 def test_bad_knobs_raise_one_line_naming_the_knob(kwargs, name):
     with pytest.raises(ValueError, match=name) as caught:
@@ -297,7 +308,8 @@ def test_convert_command_rejects_bad_knobs_in_one_line(tmp_path, args, words):
     SyntheticKnobs(lane_width_m=(2.7, 2.8), traffic_density=3.0),
     SyntheticKnobs(speed_limit_scale=2.0, driver_style_spread=3.0),
     SyntheticKnobs(speed_limit_scale=0.5, lane_width_m=(4.5, 5.0), parked_fraction=(1.0, 1.0)),
-    SyntheticKnobs(junction_parking=1.0, max_parked=48, parked_fraction=(1.0, 1.0), sdc_slow_start=1.0),
+    SyntheticKnobs(junction_parking=1.0, max_parked=48, parked_fraction=(1.0, 1.0), sdc_slow_start=1.0,
+                   walkers_per_crosswalk=(8.0, 12.0)),
 ])
 def test_extreme_knobs_keep_the_logs_safe(knobs):
     """At the knobs' limits vehicles still never overlap nor run a red light, and the scenarios validate."""
