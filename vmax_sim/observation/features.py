@@ -79,9 +79,13 @@ def nearest_objects(sdc_xy: jnp.ndarray, object_xy: jnp.ndarray, valid: jnp.ndar
 
     (2,), (N, 2), (N,) -> indices (num,) int32, valid (num,) bool.
     """
-    dist = jnp.where(valid, vector_length(object_xy - sdc_xy), jnp.inf)
-    k = min(num, dist.shape[0])
-    neg, idx = jax.lax.top_k(-dist, k)
+    return lowest_ranked(jnp.where(valid, vector_length(object_xy - sdc_xy), jnp.inf), num)
+
+
+def lowest_ranked(rank: jnp.ndarray, num: int) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """The `num` entries of lowest finite rank, padded when there are fewer. (N,) -> (num,) int32, (num,) bool."""
+    k = min(num, rank.shape[0])
+    neg, idx = jax.lax.top_k(-rank, k)
     return (jnp.pad(idx.astype(jnp.int32), (0, num - k)), jnp.pad(jnp.isfinite(neg), (0, num - k)))
 
 
@@ -101,11 +105,7 @@ def route_first_objects(inputs: ObservationInputs, targets: jnp.ndarray, targets
     dist = vector_length(local)
     valid = inputs.object_valid[:, -1]
     # on-route objects rank before every other (distances are far below the offset); invalid ones last
-    rank = jnp.where(valid, dist - jnp.where(on_route, 1e6, 0.0), jnp.inf)
-    k = min(config.num_objects, rank.shape[0])
-    neg, idx = jax.lax.top_k(-rank, k)
-    pad = config.num_objects - k
-    return jnp.pad(idx.astype(jnp.int32), (0, pad)), jnp.pad(jnp.isfinite(neg), (0, pad))
+    return lowest_ranked(jnp.where(valid, dist - jnp.where(on_route, 1e6, 0.0), jnp.inf), config.num_objects)
 
 
 def object_features(inputs: ObservationInputs, indices: jnp.ndarray, index_valid: jnp.ndarray,
