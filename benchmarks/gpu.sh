@@ -1,37 +1,64 @@
 #!/usr/bin/env bash
-# One call on a lent GPU machine (the `device` tool runs it in the repository root): install, then the simulator
-# bench, the training throughput rows and a short learning run, everything under $OUT (or ./gpu-results).
-# Budget: ~10 minutes; each stage has its own timeout so one slow stage cannot eat the others.
-# Usage: bash benchmarks/gpu.sh [LEARN_MINUTES]   (default 4)
+# One call on a lent GPU machine (the `device` tool runs it in the repository root): install, then the self-play
+# throughput rows, the simulator bench, the SAC / PPO / BC throughput rows and a short learning run, everything
+# under $OUT (or ./gpu-results). Most wanted first: a stage cut off by its timeout leaves the earlier ones' files.
+# Budget: ~9.6 minutes of stages (timeouts below) plus the install; run it with the device tool's timeout_s=600.
+#
+# Install: the lent machines reach no package index, but their image holds Python 3.12 with JAX (CUDA), Flax, Optax,
+# Orbax, NumPy, SciPy, Matplotlib...; what it lacks travels as wheels in .whl/ (git-ignored; `carry: [".whl"]`):
+#   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+#     --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 -d .whl shapely google-crc32c tensorboardX
+# With no .whl/ it installs from the network instead (`pip install -e .[sim] jax[cuda12]`).
+# Usage: bash benchmarks/gpu.sh [LEARN_MINUTES]   (default 0.5)
 set -uo pipefail
 cd "$(dirname "$0")/.."
 out="${OUT:-gpu-results}"
 mkdir -p "$out"
-learn_minutes="${1:-4}"
+learn_minutes="${1:-0.5}"
+site=/tmp/vmax-gpu-site
 log() { echo "[$(date +%H:%M:%S)] $*" | tee -a "$out/gpu.log"; }
+export PYTHONUNBUFFERED=1 VMAX_CACHE_DIR=/tmp/vmax-gpu-cache
+small="data.synthetic_train_scenarios=200"  # every stage shares one generated split (the default 2,000 take minutes)
 
 log "install"
-python3 -m venv /tmp/vmax-gpu-venv && /tmp/vmax-gpu-venv/bin/pip install -q -e '.[sim]' 'jax[cuda12]' \
-  >>"$out/gpu.log" 2>&1 || log "install failed (see gpu.log)"
-py=/tmp/vmax-gpu-venv/bin/python
+if [ -d .whl ]; then  # into a folder on PYTHONPATH: the image's python3 is itself a venv, which a new venv would not see
+  python3 -m pip install -q --no-index --no-deps --no-build-isolation --no-compile --target "$site" .whl/*.whl . \
+    >>"$out/gpu.log" 2>&1 || log "install failed (see gpu.log)"
+  export PYTHONPATH="$site" PATH="$site/bin:$PATH"
+  py=python3
+else
+  python3 -m venv /tmp/vmax-gpu-venv && /tmp/vmax-gpu-venv/bin/pip install -q -e '.[sim]' 'jax[cuda12]' \
+    >>"$out/gpu.log" 2>&1 || log "install failed (see gpu.log)"
+  export PATH="/tmp/vmax-gpu-venv/bin:$PATH"
+  py=/tmp/vmax-gpu-venv/bin/python
+fi
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv >"$out/device.txt" 2>&1
-$py -c "import jax; print(jax.devices())" >>"$out/device.txt" 2>&1
+"$py" -c "import jax, flax, optax; print(jax.__version__, flax.__version__, optax.__version__, jax.devices())" \
+  >>"$out/device.txt" 2>&1
+nproc >>"$out/device.txt"
+cat "$out/device.txt"
 
-log "simulator bench (batches up to 4096)"
-timeout 180 /tmp/vmax-gpu-venv/bin/vmax-sim bench --batch-sizes 1,32,1024,4096 --json >"$out/bench.json" 2>>"$out/gpu.log"
+# a stage cut off by `timeout` leaves benchmarks/training.py's child (and its GPU memory) behind: end it
+stop_children() { pkill -f "benchmarks/training.py" 2>/dev/null; sleep 1; }
 
-log "training throughput rows (SAC, PPO, BC)"
-timeout 180 $py benchmarks/training.py --json --chunks 4 --only "sac-mlp,ppo-mlp,bc-mlp" \
-  >"$out/training.json" 2>>"$out/gpu.log"
+log "self-play throughput rows: the CPU table's 8 x 8, then 256 x 32 scenes x agent slots"
+timeout 200 "$py" benchmarks/training.py --chunks 3 --only "ppo-selfplay selfplay.max_agents=8,\
+ppo-selfplay selfplay.max_agents=32 algo.num_envs=256" \
+  "$small" 2>>"$out/gpu.log" | tee "$out/selfplay.txt"
+stop_children
 
-log "self-play throughput rows (the CPU table's: 8 x 8, 16 x 8 and 4 x 32 scenes x agent slots)"
-timeout 240 $py benchmarks/training.py --json --chunks 4 --only "ppo-selfplay selfplay.max_agents=8,\
-ppo-selfplay selfplay.max_agents=8 algo.num_envs=16,ppo-selfplay selfplay.max_agents=32 algo.num_envs=4" \
-  >"$out/selfplay.json" 2>>"$out/gpu.log"
+log "simulator bench (batches 32 to 4096)"
+timeout 70 vmax-sim bench --batch-sizes 32,1024,4096 2>>"$out/gpu.log" | tee "$out/bench.txt"
 
+log "training throughput rows (SAC and PPO, MLP encoder)"
+timeout 150 "$py" benchmarks/training.py --chunks 3 --only "sac-mlp,ppo-mlp" "$small" \
+  2>>"$out/gpu.log" | tee "$out/training.txt"
+stop_children
+
+# the budget counts from the first training chunk: generating the held-out split and compiling come before it (~90 s)
 log "a short learning run (default preset, ${learn_minutes} min wall-clock budget)"
-timeout $(( learn_minutes * 60 + 150 )) /tmp/vmax-gpu-venv/bin/vmax-sim train --out "$out/learn" --quiet \
-  data.synthetic_train_scenarios=200 train.max_wall_minutes="$learn_minutes" train.total_env_steps=100000000 \
-  >"$out/learn.log" 2>&1
-cp "$out/learn/summary.json" "$out/learn_summary.json" 2>/dev/null
+timeout "$(python3 -c "print(int(${learn_minutes} * 60 + 120))")" vmax-sim train --out /tmp/vmax-gpu-learn \
+  --quiet "$small" train.max_wall_minutes="$learn_minutes" train.total_env_steps=100000000 >"$out/learn.log" 2>&1
+tail -5 "$out/learn.log"
+cp /tmp/vmax-gpu-learn/summary.json "$out/learn_summary.json" 2>/dev/null  # $OUT returns 8 files at most
 log "done"

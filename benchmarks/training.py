@@ -51,6 +51,18 @@ def _one(preset: str, overrides: list[str], chunks: int) -> dict:
     return result
 
 
+def _selected(wanted: list[str]) -> list[tuple[str, list[str]]]:
+    """The CONFIGS rows a preset name or a whole 'preset override ...' row names; a row with overrides that is
+    not in CONFIGS runs as written (e.g. larger self-play batches on a GPU)."""
+    rows = [c for c in CONFIGS if c[0] in wanted or " ".join([c[0], *c[1]]) in wanted]
+    known = {" ".join([c[0], *c[1]]) for c in CONFIGS} | {c[0] for c in CONFIGS}
+    for text in wanted:
+        words = text.split()
+        if len(words) > 1 and text not in known:
+            rows.append((words[0], words[1:]))
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--quick", action="store_true", help="three configurations, fewer chunks")
@@ -65,8 +77,7 @@ def main() -> None:
         return
     configs = CONFIGS[:3] if args.quick else CONFIGS
     if args.only:
-        wanted = set(args.only.split(","))
-        configs = [c for c in CONFIGS if c[0] in wanted or " ".join([c[0], *c[1]]) in wanted]
+        configs = _selected(args.only.split(","))
     rows = []
     for preset, overrides in configs:
         done = subprocess.run([sys.executable, __file__, "--chunks", str(args.chunks), "--child", preset,
