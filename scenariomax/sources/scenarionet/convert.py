@@ -407,11 +407,29 @@ def _link_ids(values, ids: Mapping) -> list[int]:
     return out
 
 
+# ScenarioNet's nuScenes and Argoverse 2 converters write one constant on every lane (100 km/h; 85 mph): those
+# maps carry no speed limits, so the value is the writer's placeholder, not the road's (-1: unknown, and the
+# enrichment's lane-type default applies, as for our own AV2 converter)
+DATASETS_WITHOUT_SPEED_LIMITS = ("nuscenes", "av2", "argoverse")
+
+
+def map_has_speed_limits(desc: Mapping, meta: Mapping) -> bool:
+    """False for databases whose writer put a placeholder in every lane's speed limit (metadata `dataset`, or the
+    `version` prefix that older writers set alone, e.g. "nuscenesv1.0-mini")."""
+    names = (str(meta.get("dataset", "")), str(desc.get("version", "")))
+    return not any(name.lower().startswith(DATASETS_WITHOUT_SPEED_LIMITS) for name in names)
+
+
 def _speed_limit(feature: Mapping) -> float:
-    for key, scale in (("speed_limit_mph", MPH_TO_MPS), ("speed_limit_kmh", KMH_TO_MPS)):
+    """A lane's speed limit in m/s (nuPlan's writer: `speed_limit_mps`; WOMD's: mph and km/h), -1 when unknown."""
+    for key, scale in (("speed_limit_mps", 1.0), ("speed_limit_mph", MPH_TO_MPS), ("speed_limit_kmh", KMH_TO_MPS)):
         value = feature.get(key)
-        if value is not None and np.isfinite(float(value)) and float(value) > 0:
-            return float(value) * scale
+        try:
+            value = float(value) if value is not None else math.nan
+        except (TypeError, ValueError):
+            continue
+        if np.isfinite(value) and value > 0:
+            return value * scale
     return -1.0
 
 
@@ -461,7 +479,9 @@ def _feature_points(feature: Mapping, rg_type: int) -> np.ndarray:
     return points[np.all(finite32(points), axis=1)]  # a NaN point would poison the resampling
 
 
-def map_polylines(features: Mapping, ids: Mapping) -> tuple[list[MapPolyline], list[LaneLinks]]:
+def map_polylines(features: Mapping, ids: Mapping, speed_limits: bool = True
+                  ) -> tuple[list[MapPolyline], list[LaneLinks]]:
+    """The roadgraph polylines and lane links of a map; `speed_limits` False: the lanes' values are placeholders."""
     polylines, links = [], []
     for key, feature in features.items():
         if not isinstance(feature, Mapping):
@@ -474,8 +494,8 @@ def map_polylines(features: Mapping, ids: Mapping) -> tuple[list[MapPolyline], l
             continue
         is_lane = rg_type in sch.LANE_TYPES
         fid = ids[key]
-        polylines.append(MapPolyline(fid, rg_type, points, speed_limit=_speed_limit(feature) if is_lane else -1.0,
-                                     closed=rg_type in _CLOSED_TYPES))
+        limit = _speed_limit(feature) if is_lane and speed_limits else -1.0
+        polylines.append(MapPolyline(fid, rg_type, points, speed_limit=limit, closed=rg_type in _CLOSED_TYPES))
         if is_lane:
             links.append(LaneLinks(fid, successors=_link_ids(feature.get("exit_lanes", feature.get("exit")), ids),
                                    predecessors=_link_ids(feature.get("entry_lanes", feature.get("entry")), ids),
@@ -775,7 +795,10 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iter
     labels = _object_labels(meta, keys)
     features = map_features(desc)
     map_ids = stable_int_ids(features)
-    polylines, links = map_polylines(features, map_ids)
+    speed_limits = map_has_speed_limits(desc, meta)
+    if not speed_limits:
+        file_notes["speed_limits_ignored"] = "the writer's constant placeholder on every lane (no limits in this map)"
+    polylines, links = map_polylines(features, map_ids, speed_limits=speed_limits)
     roadgraph = polylines_to_roadgraph(polylines)
     lane_graph = lane_graph_arrays(links, sizes.num_lane_links)
     light_states, unread_entries = light_table(desc.get("dynamic_map_states"), num_steps)

@@ -72,6 +72,35 @@ def test_map_ids_types_speed_limits_and_links(converted):
     assert converted.lane_predecessors[1, 0] == MAP_IDS["lane-1"]
 
 
+@pytest.mark.parametrize("dataset, version", [("nuscenes", "nuscenesv1.0-mini"), ("av2", "v2"),
+                                              ("", "nuscenesv1.0-trainval")])
+def test_placeholder_speed_limits_are_unknown(tmp_path, dataset, version):
+    # ScenarioNet's nuScenes and AV2 writers put one constant (100 km/h, 85 mph) on every lane: those maps have no
+    # limits: unknown here (the enrichment gives them its lane-type default), and the manifest says why.
+    description = build_description()
+    description["metadata"]["dataset"], description["version"] = dataset, version
+    for key in ("lane-1", "lane-2"):
+        description["map_features"][key]["speed_limit_kmh"] = 100
+    items = convert(write_pickle(tmp_path / "sd_nusc.pkl", description))
+    lanes = np.isin(items[0].roadgraph_type, sch.LANE_TYPES) & items[0].roadgraph_valid
+    assert lanes.any() and (items[0].roadgraph_speed_limit[lanes] == -1).all()
+    assert "speed_limits_ignored" in items[0].metadata["manifest_notes"]
+
+
+def test_nuplan_speed_limits_in_metres_per_second(tmp_path):
+    description = build_description()
+    description["metadata"]["dataset"] = "nuplan"
+    lane1 = description["map_features"]["lane-1"]
+    del lane1["speed_limit_kmh"]
+    lane1["speed_limit_mps"] = 11.2
+    description["map_features"]["lane-2"]["speed_limit_mps"] = None  # nuPlan lanes without a limit
+    del description["map_features"]["lane-2"]["speed_limit_mph"]
+    items = convert(write_pickle(tmp_path / "sd_nuplan.pkl", description))
+    limits = items[0].roadgraph_speed_limit
+    np.testing.assert_allclose(limits[items[0].roadgraph_id == MAP_IDS["lane-1"]], 11.2, rtol=1e-6)
+    assert (limits[items[0].roadgraph_id == MAP_IDS["lane-2"]] == -1).all()
+
+
 def test_traffic_light_resampled(converted):
     assert converted.tl_state.shape == (1, 91)
     assert converted.tl_state[0, 49] == sch.TL_STOP and converted.tl_state[0, 50] == sch.TL_GO
