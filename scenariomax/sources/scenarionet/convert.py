@@ -407,6 +407,11 @@ def _link_ids(values, ids: Mapping) -> list[int]:
     return out
 
 
+# ScenarioNet's nuScenes, nuPlan and Argoverse 2 converters write the outline of the drivable area (its polygons'
+# union) as solid white lines keyed "boundary_<n>": those maps have no road-edge layer, and this outline is the
+# kerb. Read as a painted line, the map had no road edge at all (no off-road, nothing for the observation's edges)
+DRIVABLE_OUTLINE_PREFIX = "boundary_"
+
 # ScenarioNet's nuScenes and Argoverse 2 converters write one constant on every lane (100 km/h; 85 mph): those
 # maps carry no speed limits, so the value is the writer's placeholder, not the road's (-1: unknown, and the
 # enrichment's lane-type default applies, as for our own AV2 converter)
@@ -489,6 +494,8 @@ def map_polylines(features: Mapping, ids: Mapping, speed_limits: bool = True
         rg_type = feature_type(feature)
         if rg_type is None:
             continue  # unknown feature kinds (e.g. drivable-area polygons) are not part of the roadgraph
+        if rg_type == sch.RG_SOLID_SINGLE_WHITE and str(key).startswith(DRIVABLE_OUTLINE_PREFIX):
+            rg_type = sch.RG_ROAD_EDGE_BOUNDARY
         points = _feature_points(feature, rg_type)
         if len(points) == 0:
             continue

@@ -87,6 +87,22 @@ def test_placeholder_speed_limits_are_unknown(tmp_path, dataset, version):
     assert "speed_limits_ignored" in items[0].metadata["manifest_notes"]
 
 
+def test_drivable_area_outline_is_a_road_edge(tmp_path):
+    # ScenarioNet's nuScenes / nuPlan / AV2 writers outline the drivable area as solid white lines "boundary_<n>"
+    description = build_description()
+    outline = np.array([[0.0, 3.0], [150.0, 3.0]])
+    description["map_features"]["boundary_0"] = {"type": "ROAD_LINE_SOLID_SINGLE_WHITE", "polyline": outline}
+    description["map_features"]["line-9"] = {"type": "ROAD_LINE_SOLID_SINGLE_WHITE", "polyline": outline - [0, 1]}
+    scenario = convert(write_pickle(tmp_path / "sd_outline.pkl", description))[0]
+    ids = stable_int_ids(description["map_features"])
+
+    def types_of(key):
+        return set(scenario.roadgraph_type[scenario.roadgraph_id == ids[key]].tolist())
+
+    assert types_of("boundary_0") == {sch.RG_ROAD_EDGE_BOUNDARY}
+    assert types_of("line-9") == {sch.RG_SOLID_SINGLE_WHITE}  # a painted line keyed otherwise stays one
+
+
 def test_nuplan_speed_limits_in_metres_per_second(tmp_path):
     description = build_description()
     description["metadata"]["dataset"] = "nuplan"
