@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # One call on a lent GPU machine (the `device` tool runs it in the repository root): install, then the self-play
-# throughput rows, the simulator bench, the SAC / PPO / BC throughput rows and a short learning run, everything
+# throughput rows, the simulator bench, the SAC and PPO throughput rows and a short learning run, everything
 # under $OUT (or ./gpu-results). Most wanted first: a stage cut off by its timeout leaves the earlier ones' files.
 # Budget: ~9.6 minutes of stages (timeouts below) plus the install; run it with the device tool's timeout_s=600.
 #

@@ -54,13 +54,9 @@ def _one(preset: str, overrides: list[str], chunks: int) -> dict:
 def _selected(wanted: list[str]) -> list[tuple[str, list[str]]]:
     """The CONFIGS rows a preset name or a whole 'preset override ...' row names; a row with overrides that is
     not in CONFIGS runs as written (e.g. larger self-play batches on a GPU)."""
+    names = {" ".join([preset, *overrides]) for preset, overrides in CONFIGS}
     rows = [c for c in CONFIGS if c[0] in wanted or " ".join([c[0], *c[1]]) in wanted]
-    known = {" ".join([c[0], *c[1]]) for c in CONFIGS} | {c[0] for c in CONFIGS}
-    for text in wanted:
-        words = text.split()
-        if len(words) > 1 and text not in known:
-            rows.append((words[0], words[1:]))
-    return rows
+    return rows + [(text.split()[0], text.split()[1:]) for text in wanted if " " in text.strip() and text not in names]
 
 
 def main() -> None:
