@@ -100,3 +100,20 @@ def test_bc_drives_with_the_noisy_expert_or_on_its_share_of_rows_the_student():
     np.testing.assert_array_equal(bc_behaviour_action(expert, student, key, 0.0, 1.0, jnp.array(True)), student)
     # before algo.student_after env steps the expert drives every row
     np.testing.assert_array_equal(bc_behaviour_action(expert, student, key, 0.0, 1.0, jnp.array(False)), expert)
+
+
+def test_whole_episode_dagger_keeps_the_same_rows_for_the_student_at_every_step():
+    from vmax_sim.training.loop import bc_behaviour_action
+
+    expert, student = jnp.full((16, 2), 0.5), jnp.full((16, 2), -0.25)
+    drivers = []
+    for step in range(5):
+        action = np.asarray(bc_behaviour_action(expert, student, jax.random.PRNGKey(step), 0.1, 0.5, jnp.array(True),
+                                                "episode"))
+        drivers.append((action == -0.25).all(axis=1))
+    # the first half of the rows is the student's at every step (its errors compound over a whole episode), the
+    # other half the noisy expert's
+    for by_student in drivers:
+        np.testing.assert_array_equal(by_student, np.arange(16) < 8)
+    with pytest.raises(ValueError, match="student_mix must be one of episode, step, got 'trajectory'"):
+        apply_overrides(preset_config("bc-mlp"), ["algo.student_mix=trajectory"])

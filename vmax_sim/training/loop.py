@@ -82,15 +82,20 @@ def _updates(learner: Learner, learner_state, buffer: TransitionReplay, key: jax
 
 
 def bc_behaviour_action(expert: jax.Array, student: jax.Array | None, key: jax.Array, noise: float,
-                        student_drive: float, student_started: jax.Array) -> jax.Array:
+                        student_drive: float, student_started: jax.Array, student_mix: str = "step") -> jax.Array:
     """The action BC drives with, per row: the expert's plus Gaussian noise (DART: visits states off the expert's
-    path, where its closed-loop labels steer back), or on a `student_drive` share of the rows (once
-    `student_started`) the student's own (DAgger: the states the student drives into, labelled by the expert).
+    path, where its closed-loop labels steer back), or on a `student_drive` share (once `student_started`) the
+    student's own (DAgger: the states the student drives into, labelled by the expert). student_mix "episode":
+    that share is the first rows, always (each row drives whole episodes); "step": drawn per row and step.
     expert, student (B, A) -> (B, A)"""
     action = expert + noise * jax.random.normal(key, expert.shape) if noise > 0 else expert
     if student is None or student_drive <= 0:
         return action
-    by_student = (jax.random.uniform(jax.random.fold_in(key, 1), expert.shape[:1] + (1,)) < student_drive)
+    rows = expert.shape[:1] + (1,)
+    if student_mix == "episode":
+        by_student = jnp.arange(expert.shape[0]).reshape(rows) < round(student_drive * expert.shape[0])
+    else:
+        by_student = jax.random.uniform(jax.random.fold_in(key, 1), rows) < student_drive
     by_student &= student_started
     return jnp.where(by_student, student, action)
 
@@ -112,7 +117,8 @@ def make_off_policy_chunk(env: LearningEnv, learner: Learner, algo: str, algo_co
             if algo_config.student_drive > 0:
                 student = learner.act(learner.policy_params(carry.learner), obs, act_key, True)
             action = bc_behaviour_action(expert, student, random_key, algo_config.behaviour_noise,
-                                         algo_config.student_drive, carry.env_steps >= algo_config.student_after)
+                                         algo_config.student_drive, carry.env_steps >= algo_config.student_after,
+                                         algo_config.student_mix)
         else:
             expert = None
             policy_action = learner.act(learner.policy_params(carry.learner), obs, act_key, False)

@@ -15,6 +15,9 @@ from typing import Any
 from vmax_sim.agents.common import check_positive, preset
 
 
+STUDENT_MIXES = ("episode", "step")
+
+
 @dataclasses.dataclass(frozen=True)
 class BCConfig:
     # learning
@@ -41,9 +44,13 @@ class BCConfig:
     # std of Gaussian noise added to the expert's applied action (normalised units) while collecting; the
     # labels stay the closed-loop expert's actions at the visited states (DART-style augmentation)
     behaviour_noise: float = 0.0
-    # share of steps driven by the student's own (mean) action instead of the noisy expert's (DAgger's beta,
-    # mixed per step): the data then hold the states the student drives into, labelled by the expert
+    # share driven by the student's own (mean) action instead of the noisy expert's (DAgger's beta): the data
+    # then hold the states the student drives into, labelled by the expert
     student_drive: float = 0.0
+    # how that share is drawn: "episode": the first student_drive of the env rows are the student's, whole
+    # episodes (its errors compound as they do when it drives alone, and the labels at those states correct
+    # them); "step": every row, every step, drawn anew (the expert's next step corrects the student's last)
+    student_mix: str = "step"
     student_after: int = 20_000  # env steps before the student drives (once it has learnt something)
 
     def __post_init__(self):
@@ -53,6 +60,8 @@ class BCConfig:
             raise ValueError(f"ema_decay must be in [0, 1), got {self.ema_decay}")
         if not 0.0 <= self.student_drive <= 1.0:
             raise ValueError(f"student_drive must be in [0, 1], got {self.student_drive}")
+        if self.student_mix not in STUDENT_MIXES:
+            raise ValueError(f"student_mix must be one of {', '.join(STUDENT_MIXES)}, got {self.student_mix!r}")
         if self.nll_weight < 0 or self.mse_weight < 0 or self.nll_weight + self.mse_weight == 0:
             raise ValueError("nll_weight and mse_weight must be >= 0 and not both 0")
 
