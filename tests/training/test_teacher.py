@@ -117,3 +117,23 @@ def test_whole_episode_dagger_keeps_the_same_rows_for_the_student_at_every_step(
         np.testing.assert_array_equal(by_student, np.arange(16) < 8)
     with pytest.raises(ValueError, match="student_mix must be one of episode, step, got 'trajectory'"):
         apply_overrides(preset_config("bc-mlp"), ["algo.student_mix=trajectory"])
+
+
+@pytest.mark.slow  # PDM-Closed compiles for ~20 s per configuration on 2 cores
+def test_the_pdm_state_teacher_labels_from_the_state_not_from_the_last_action():
+    from vmax_sim.policies.teacher import pdm_state_teacher, pdm_teacher
+
+    # a car cruising at 10 m/s on a free 13.4 m/s lane; a second copy had braked hard on its last step
+    xs = np.stack([10.0 * 0.1 * np.arange(NUM_STEPS), np.full(NUM_STEPS, 300.0)])
+    scenario = road_scenario("cruise", xs, np.zeros_like(xs))
+    env = LearningEnv(EnvConfig(max_num_objects=8))
+    state = env.core.reset(jax.tree.map(lambda a: a[0], scenarios_to_batch([scenario], small_data_config(""))))
+    t = int(state.timestep)
+    traj = state.sim_trajectory
+    braked = state.replace(sim_trajectory=traj.replace(vel_x=traj.vel_x.at[0, t - 1].set(10.5)))  # -5 m/s^2 just now
+    pdm, pdm_state = jax.jit(pdm_teacher(env.core)), jax.jit(pdm_state_teacher(env.core))
+    # PDM-Closed's label follows the last action (jerk-limited); the state teacher's is the same either way
+    assert float(pdm(braked)[0]) < float(pdm(state)[0]) - 0.05
+    np.testing.assert_allclose(pdm_state(braked), pdm_state(state), atol=1e-6)
+    # and, free of the jerk limit's 0.4 m/s^2 per step, it accelerates toward the limit at once
+    assert float(pdm_state(state)[0]) > float(pdm(state)[0]) + 0.05

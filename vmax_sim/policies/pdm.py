@@ -80,6 +80,10 @@ class PDMConfig:
     # "constant_turn" (their last yaw rate too) or "lane" (the yaw rate that follows their lane's bend)
     forecast: str = "lane"
     max_jerk: float = 4.0  # m/s^3 the proposals' acceleration may change by (nuPlan's comfort bound: 4.13); 0: off
+    # proposals whose first step jerks away from the acceleration executed last score no comfort. Off (with
+    # max_jerk 0), the plan is a function of the current state alone, not of the last action: a teacher whose
+    # label a student can read off what it observes (train.teacher=pdm_state)
+    first_step_comfort: bool = True
     stop_at_red: bool = True  # forecast objects stop at a red light's stop point straight ahead of them
     corridor_margin: float = 0.75  # m beside the SDC's half width in which a forecast object leads a proposal
     num_objects: int = 16  # objects forecast (nearest the SDC, those in its corridor ahead first)
@@ -360,7 +364,9 @@ def score(state: SimulatorState, scene: Scene, fc: Forecast, props: Proposals, c
     valid = jnp.ones(props.arc.shape[1], bool)
     smooth = jax.vmap(lambda x, y, yaw: comfort_score(comfort_signals(x, y, yaw, valid, coarse), coarse))(
         props.xy[..., 0], props.xy[..., 1], props.yaw)
-    comfortable = smooth * (jnp.abs(first_jerk[:, 0]) <= metrics.max_abs_lon_jerk).astype(jnp.float32)
+    comfortable = smooth
+    if config.first_step_comfort:
+        comfortable = smooth * (jnp.abs(first_jerk[:, 0]) <= metrics.max_abs_lon_jerk).astype(jnp.float32)
 
     terms = {"ttc_within_bound": ttc_ok, "ego_progress": progress_ratio, "speed_limit_compliance": speed_ok,
              "comfort": comfortable, "multiple_lanes_score": lanes_ok}

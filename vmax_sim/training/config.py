@@ -47,7 +47,7 @@ class TrainDataConfig:
 
 
 TRAFFIC_CHOICES = ("log", "idm")  # train.traffic: who drives the objects other than the SDC while training
-TEACHER_CHOICES = ("log", "idm", "pdm")  # train.teacher: whose actions label BC's (and BC+SAC's) steps
+TEACHER_CHOICES = ("log", "idm", "pdm", "pdm_state")  # train.teacher: whose actions label BC's (and BC+SAC's) steps
 
 
 @dataclasses.dataclass(frozen=True)

@@ -41,7 +41,7 @@ from vmax_sim.data.mixture import SYNTHETIC, format_sources, parse_sources, sour
 from vmax_sim.env.learning import LearningEnv
 from vmax_sim.env.selfplay import SelfPlayEnv
 from vmax_sim.networks import make_encoder
-from vmax_sim.policies.teacher import idm_teacher, pdm_teacher
+from vmax_sim.policies.teacher import idm_teacher, pdm_state_teacher, pdm_teacher
 from vmax_sim.policies.traffic import idm_traffic
 from vmax_sim.training import distributed
 from vmax_sim.training.best import BestCheckpoint
@@ -121,7 +121,7 @@ def components(config: TrainConfig):
 # train.traffic -> LearningEnv.traffic (None: the log)
 TRAFFIC_DRIVERS = {"log": None, "idm": idm_traffic}
 # train.teacher -> LearningEnv.teacher (None: the log-following action)
-TEACHERS = {"log": None, "idm": idm_teacher, "pdm": pdm_teacher}
+TEACHERS = {"log": None, "idm": idm_teacher, "pdm": pdm_teacher, "pdm_state": pdm_state_teacher}
 
 _CHUNKS: dict = {}
 
