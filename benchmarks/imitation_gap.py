@@ -1,0 +1,109 @@
+"""How far a behaviour-cloning student is from its teacher, at the teacher's states and at its own.
+
+A student can match its teacher's labels closely along the teacher's own driving and still drift once it drives
+itself (covariate shift), or copy what its observation shows of the last action (a teacher whose label depends on
+the last action makes that copy a good fit). This script drives a training run's held-out split twice, once with
+the teacher, once with the student, and at every step compares the student's action with the teacher's label for
+that state: mean absolute error and bias per action dimension (normalised units, [-1, 1]), and the share of steps
+where the student stands (< 0.5 m/s) and holds still while the teacher would pull away (label > +0.05).
+
+Usage: python benchmarks/imitation_gap.py RUN_DIR [--teacher pdm|pdm_state|idm] [--data SHARDS] [--num-scenarios N]
+       [--step N] [--json]
+The teacher defaults to the run's own `train.teacher` (a run taught by the log is compared with PDM-Closed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+STANDING_MPS = 0.5  # the SDC counts as standing below this speed
+PULL_AWAY = 0.05  # a normalised acceleration label above this asks the SDC to move off
+
+
+def gap_statistics(student: np.ndarray, teacher: np.ndarray, speed: np.ndarray) -> dict:
+    """student, teacher (n, A) actions at the same n states, speed (n,) m/s -> the summary (plain floats)."""
+    error = student - teacher
+    standing = speed < STANDING_MPS
+    stuck = standing & (teacher[:, 0] > PULL_AWAY) & (student[:, 0] <= PULL_AWAY)
+    return {"steps": int(len(error)),
+            "mae_accel": float(np.abs(error[:, 0]).mean()), "mae_steer": float(np.abs(error[:, 1]).mean()),
+            "bias_accel": float(error[:, 0].mean()), "bias_steer": float(error[:, 1].mean()),
+            "standing_share": float(standing.mean()),
+            "held_still_share": float(stuck.sum() / max(int((standing & (teacher[:, 0] > PULL_AWAY)).sum()), 1))}
+
+
+def drive(loaded, teacher_fn, data: str, num_scenarios: int | None, driver: str) -> dict:
+    """One evaluation of `data` driven by "teacher" or "student", the pairs recorded at every valid step."""
+    from vmax_sim.datatypes import sdc_action
+    from vmax_sim.env.metrics_adapter import sdc_index
+    from vmax_sim.evaluation.evaluate import evaluate
+    from vmax_sim.policies.base import Policy
+    from vmax_sim.training.run import components, data_config
+
+    config = loaded.config
+    pairs: list[tuple[np.ndarray, ...]] = []
+
+    def record(student, teacher, speed, live):
+        pairs.append((np.asarray(student).reshape(-1, 2), np.asarray(teacher).reshape(-1, 2),
+                      np.asarray(speed).reshape(-1), np.asarray(live).reshape(-1)))
+
+    def action_fn(params, state, observation, key):
+        slot = sdc_index(state)
+        student = loaded.policy.action_fn(params, state, observation, key).data[slot]
+        teacher = teacher_fn(state)
+        traj, t = state.sim_trajectory, state.timestep
+        speed = jnp.hypot(traj.vel_x[slot, t], traj.vel_y[slot, t])
+        jax.debug.callback(record, student, teacher, speed, traj.valid[slot, t])
+        return sdc_action(state, teacher if driver == "teacher" else student)
+
+    result = evaluate(Policy(f"{driver}-driven", action_fn, needs_observation=True),
+                      data_config(config, data, batch_size=8), env_config=components(config)[0].env_config,
+                      obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params)
+    student, teacher, speed, live = (np.concatenate(parts) for parts in zip(*pairs))
+    summary = gap_statistics(student[live], teacher[live], speed[live])
+    summary["accuracy"] = float(result.summary["accuracy"])
+    return summary
+
+
+def main() -> None:
+    from vmax_sim.env.environment import Environment
+    from vmax_sim.training.run import TEACHERS, components, resolve_eval_data
+    from vmax_sim.training.run_policy import load_trained_policy
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run_dir")
+    parser.add_argument("--teacher", choices=[name for name in TEACHERS if name != "log"])
+    parser.add_argument("--data")
+    parser.add_argument("--num-scenarios", type=int, default=50)
+    parser.add_argument("--step", type=int)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+
+    loaded = load_trained_policy(args.run_dir, args.step)
+    name = args.teacher or (loaded.config.train.teacher if loaded.config.train.teacher != "log" else "pdm")
+    core = Environment(dataclasses.replace(components(loaded.config)[0].env_config, normalize_actions=True))
+    teacher_fn = TEACHERS[name](core)
+    data = args.data or resolve_eval_data(loaded.config, lambda line: None)
+    report = {"run": args.run_dir, "env_steps": loaded.env_steps, "teacher": name, "data": data,
+              "teacher_driving": drive(loaded, teacher_fn, data, args.num_scenarios, "teacher"),
+              "student_driving": drive(loaded, teacher_fn, data, args.num_scenarios, "student")}
+    if args.json:
+        print(json.dumps(report, indent=1))
+        return
+    print(f"{args.run_dir} at {loaded.env_steps} env steps, teacher {name}, {data}")
+    for driver in ("teacher_driving", "student_driving"):
+        r = report[driver]
+        print(f"  {driver.replace('_', ' ')}: {r['steps']} steps, accel MAE {r['mae_accel']:.3f} "
+              f"(bias {r['bias_accel']:+.3f}), steer MAE {r['mae_steer']:.3f}; standing {100 * r['standing_share']:.1f}% "
+              f"of steps, held still where the teacher pulls away {100 * r['held_still_share']:.1f}%; "
+              f"accuracy {100 * r['accuracy']:.1f}%")
+
+
+if __name__ == "__main__":
+    main()
