@@ -100,8 +100,9 @@ def main() -> None:
     for driver in ("teacher_driving", "student_driving"):
         r = report[driver]
         print(f"  {driver.replace('_', ' ')}: {r['steps']} steps, accel MAE {r['mae_accel']:.3f} "
-              f"(bias {r['bias_accel']:+.3f}), steer MAE {r['mae_steer']:.3f}; standing {100 * r['standing_share']:.1f}% "
-              f"of steps, held still where the teacher pulls away {100 * r['held_still_share']:.1f}%; "
+              f"(bias {r['bias_accel']:+.3f}), steer MAE {r['mae_steer']:.3f}; "
+              f"standing {100 * r['standing_share']:.1f}% of steps, held still where the teacher pulls away "
+              f"{100 * r['held_still_share']:.1f}%; "
               f"accuracy {100 * r['accuracy']:.1f}%")
 
 

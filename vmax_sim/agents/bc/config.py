@@ -14,7 +14,6 @@ from typing import Any
 
 from vmax_sim.agents.common import check_positive, preset
 
-
 STUDENT_MIXES = ("episode", "step")
 
 
