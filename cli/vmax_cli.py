@@ -113,7 +113,8 @@ def _check_data(specs, deep: bool, skip: bool, quiet: bool, share: tuple[int, in
 @click.option("--preset", default="sac", show_default=True,
               help="Words joined by dashes: algorithm (sac, ppo, bc, bc_sac), encoder (none, mlp, lq, lqh, mtr, "
                    "wayformer), reward (safety, navigation, behavior), 'paper' for the paper's hyper-parameters, "
-                   "'selfplay' (ppo-selfplay: one policy drives the SDC and every controllable agent).")
+                   "'selfplay' (ppo-selfplay: one policy drives the SDC and every controllable agent), 'dagger' "
+                   "(bc-dagger: behaviour cloning's best recipe, taught by PDM-Closed; docs/learning.md).")
 @click.option("--data", default=None, help="Training shards (default: the embedded synthetic split).")
 @click.option("--eval-data", default=None, help="Held-out shards for evaluation (default: synthetic, disjoint seeds).")
 @click.option("--out", default=None, type=click.Path(file_okay=False),

@@ -99,3 +99,17 @@ def test_defaults_are_what_learns_best_here_and_paper_keeps_the_paper():
     assert (paper.network.name, action_repeat(paper), paper.algo_config.gamma) == ("lq", 1, 0.99)
     assert action_repeat(apply_overrides(sac, ["train.action_repeat=2"])) == 2
     assert config_from_dict(config_to_dict(sac)).train.action_repeat is None  # "auto" survives config.json
+
+
+def test_the_dagger_preset_is_the_documented_bc_recipe_and_overrides_still_apply():
+    config = preset_config("bc-dagger")
+    assert (config.algo, config.network.name) == ("bc", "mlp")
+    assert (config.train.teacher, config.train.traffic) == ("pdm_state", "idm")
+    assert (config.algo_config.student_drive, config.algo_config.student_mix) == (0.5, "episode")
+    assert config.algo_config.buffer_size == 600_000 and config.obs.object_selection == "route"
+    assert config.data.synthetic.sdc_slow_start == 1.0 and config.data.synthetic.max_parked == 40
+    assert preset_config("dagger") == config
+    # a user's override wins over the preset's
+    assert apply_overrides(config, ["algo.buffer_size=50000"]).algo_config.buffer_size == 50_000
+    with pytest.raises(ValueError, match="dagger trains with bc: 'sac-dagger' names sac"):
+        preset_config("sac-dagger")
