@@ -15,7 +15,6 @@ The teacher defaults to the run's own `train.teacher` (a run taught by the log i
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 
 import jax
@@ -38,13 +37,14 @@ def gap_statistics(student: np.ndarray, teacher: np.ndarray, speed: np.ndarray) 
             "held_still_share": float(stuck.sum() / max(int((standing & (teacher[:, 0] > PULL_AWAY)).sum()), 1))}
 
 
-def drive(loaded, teacher_fn, data: str, num_scenarios: int | None, driver: str) -> dict:
-    """One evaluation of `data` driven by "teacher" or "student", the pairs recorded at every valid step."""
+def drive(loaded, env_config, teacher_fn, data: str, num_scenarios: int | None, driver: str) -> dict:
+    """One evaluation of `data` driven by "teacher" or "student", the pairs recorded at every valid step.
+    env_config: the run's (its LearningEnv's `env_config`)."""
     from vmax_sim.datatypes import sdc_action
     from vmax_sim.env.metrics_adapter import sdc_index
     from vmax_sim.evaluation.evaluate import evaluate
     from vmax_sim.policies.base import Policy
-    from vmax_sim.training.run import components, data_config
+    from vmax_sim.training.run import data_config
 
     config = loaded.config
     pairs: list[tuple[np.ndarray, ...]] = []
@@ -63,7 +63,7 @@ def drive(loaded, teacher_fn, data: str, num_scenarios: int | None, driver: str)
         return sdc_action(state, teacher if driver == "teacher" else student)
 
     result = evaluate(Policy(f"{driver}-driven", action_fn, needs_observation=True),
-                      data_config(config, data, batch_size=8), env_config=components(config)[0].env_config,
+                      data_config(config, data, batch_size=8), env_config=env_config,
                       obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params)
     student, teacher, speed, live = (np.concatenate(parts) for parts in zip(*pairs))
     summary = gap_statistics(student[live], teacher[live], speed[live])
@@ -72,7 +72,6 @@ def drive(loaded, teacher_fn, data: str, num_scenarios: int | None, driver: str)
 
 
 def main() -> None:
-    from vmax_sim.env.environment import Environment
     from vmax_sim.training.run import TEACHERS, components, resolve_eval_data
     from vmax_sim.training.run_policy import load_trained_policy
 
@@ -87,12 +86,12 @@ def main() -> None:
 
     loaded = load_trained_policy(args.run_dir, args.step)
     name = args.teacher or (loaded.config.train.teacher if loaded.config.train.teacher != "log" else "pdm")
-    core = Environment(dataclasses.replace(components(loaded.config)[0].env_config, normalize_actions=True))
-    teacher_fn = TEACHERS[name](core)
+    env = components(loaded.config)[0]
+    teacher_fn = TEACHERS[name](env.core)  # the core takes normalised actions, as in training
     data = args.data or resolve_eval_data(loaded.config, lambda line: None)
     report = {"run": args.run_dir, "env_steps": loaded.env_steps, "teacher": name, "data": data,
-              "teacher_driving": drive(loaded, teacher_fn, data, args.num_scenarios, "teacher"),
-              "student_driving": drive(loaded, teacher_fn, data, args.num_scenarios, "student")}
+              "teacher_driving": drive(loaded, env.env_config, teacher_fn, data, args.num_scenarios, "teacher"),
+              "student_driving": drive(loaded, env.env_config, teacher_fn, data, args.num_scenarios, "student")}
     if args.json:
         print(json.dumps(report, indent=1))
         return

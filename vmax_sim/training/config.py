@@ -210,19 +210,22 @@ def preset_config(name: str = "sac") -> TrainConfig:
                              f"encoders {', '.join(ENCODER_NAMES)}, rewards {', '.join(REWARD_PRESETS)}, paper, "
                              f"selfplay or dagger")
     if selfplay:
-        named = [w for w in name.lower().split("-") if w in ALGORITHMS and w != "ppo"]
-        if named:
-            raise ValueError(f"self-play trains with ppo: {name!r} names {named[0]}")
+        _check_algorithm(name, "ppo", "self-play")
         return selfplay_config(encoder, reward or SELFPLAY_REWARD, algo_preset)
     if dagger:
-        named = [w for w in name.lower().split("-") if w in ALGORITHMS and w != "bc"]
-        if named:
-            raise ValueError(f"dagger trains with bc: {name!r} names {named[0]}")
-        algo = "bc"
+        algo = _check_algorithm(name, "bc", "dagger")
     network = EncoderConfig(name=encoder or DEFAULT_ENCODER[algo])
     config = TrainConfig(algo=algo, algo_preset=algo_preset, network=network,
                          reward=RewardConfig(preset=reward or "navigation"))
     return apply_overrides(config, DAGGER_OVERRIDES) if dagger else config
+
+
+def _check_algorithm(name: str, algo: str, what: str) -> str:
+    """`algo`, once no other algorithm is named in the preset `name` (a preset word that fixes the algorithm)."""
+    named = [w for w in name.lower().split("-") if w in ALGORITHMS and w != algo]
+    if named:
+        raise ValueError(f"{what} trains with {algo}: {name!r} names {named[0]}")
+    return algo
 
 
 # `bc-dagger`: the hour that ended at 97% / 0.947 on held-out synthetic and 82.8% / 0.808 on the real scenes
