@@ -108,6 +108,7 @@ def test_every_attack_on_synthetic_scenes_stays_within_the_bounds(synthetic_shar
         assert_within_bounds(log, int(info["adversary_slot"][i]), CONFIG)
 
 
+@pytest.mark.slow  # 10-14 s of the default suite's 10-minute budget; runs in CI's slow stage
 def test_the_viewer_draws_the_adversary_where_it_drove(tmp_path):
     import base64
     import re

@@ -57,6 +57,7 @@ def test_pure_pursuit_is_exact_on_a_circle():
     assert float(value) == pytest.approx(-1 / radius, rel=1e-5)
 
 
+@pytest.mark.slow  # 10-14 s of the default suite's 10-minute budget; runs in CI's slow stage
 def test_idm_accelerates_to_the_speed_limit_on_an_empty_road():
     rollout, steps = episode("idm", empty_road_scenario(speed=5.0))
     speed, accel = steps["speed"], steps["accel"]

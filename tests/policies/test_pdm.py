@@ -43,6 +43,7 @@ def _plan(scenario, config: PDMConfig | None = None):
     return jax.jit(lambda s: pdm_plan(s, config, ENV_CONFIG.first_policy_timestep))(state)
 
 
+@pytest.mark.slow  # 10-14 s of the default suite's 10-minute budget; runs in CI's slow stage
 def test_fifteen_proposals_and_the_full_speed_centre_one_wins_on_an_empty_road():
     offsets, fractions = proposal_grid(PDMConfig())
     assert offsets.shape == (15,) and sorted(set(np.asarray(offsets).tolist())) == [-1.0, 0.0, 1.0]

@@ -110,6 +110,7 @@ def test_finished_episodes_restart_on_the_next_pool_scenarios():
     np.testing.assert_array_equal(after, pool_ids[[2, 0]])
 
 
+@pytest.mark.slow  # 10-14 s of the default suite's 10-minute budget; runs in CI's slow stage
 def test_step_compiles_once():
     scenarios = pool()
     state = jitted_reset(ENV)(scenarios, 2, jax.random.PRNGKey(0))
