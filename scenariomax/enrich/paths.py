@@ -327,6 +327,9 @@ def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], 
     hits = _lane_hits(lanes, track, settings.track_hit_radius_m)
     on_lanes = _TrackNearLanes(lanes, track, settings.max_change_offset_m)
     rejoins = None  # _rejoin_candidates, on the first bridge
+    # Lane changes seen by this search: branches meet again at the same lane (entered at arc 0 from different
+    # predecessors) and would rebuild the same change (~1 in 6 on WOMD); the result depends on nothing else.
+    known_changes: dict[tuple[int, float, int], tuple[_Piece, float] | None] = {}
     # State: (pieces so far, length so far, lane, entry arc, lane changes used, lanes visited)
     stack = [((), 0.0, lane, arc, 0, (lane,)) for lane, arc in reversed(starts)]
     results: list[tuple[_Piece, ...]] = []
@@ -339,7 +342,10 @@ def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], 
             for other in graph.left[lane] + graph.right[lane]:
                 if other in visited:
                     continue
-                change = _lane_change(lanes, lane, arc, other, on_lanes, settings)
+                key = (lane, arc, other)
+                if key not in known_changes:
+                    known_changes[key] = _lane_change(lanes, lane, arc, other, on_lanes, settings)
+                change = known_changes[key]
                 if change is not None:
                     piece, landing = change
                     children.append((hits[other], (pieces + (piece,), length + _piece_length(piece), other,
