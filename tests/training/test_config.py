@@ -113,3 +113,14 @@ def test_the_dagger_preset_is_the_documented_bc_recipe_and_overrides_still_apply
     assert apply_overrides(config, ["algo.buffer_size=50000"]).algo_config.buffer_size == 50_000
     with pytest.raises(ValueError, match="dagger trains with bc: 'sac-dagger' names sac"):
         preset_config("sac-dagger")
+
+
+def test_vmax_sim_train_without_a_preset_runs_the_dagger_recipe():
+    from click.testing import CliRunner
+
+    from cli.vmax_cli import main
+    from vmax_sim.training.config import DEFAULT_PRESET
+
+    assert DEFAULT_PRESET == "bc-dagger" and preset_config() == preset_config("bc-dagger")
+    shown = CliRunner().invoke(main, ["train", "--help"], terminal_width=200).output
+    assert "[default: bc-dagger]" in " ".join(shown.split()), shown
