@@ -233,12 +233,15 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 
 
 # `bc-dagger`: the hour that ended at 97% / 0.947 on held-out synthetic and 82.8% / 0.808 on the real scenes
-# (docs/learning.md, "Why the students crept"). The buffer keeps every step of an hour: 2.9 GB.
+# (docs/learning.md, "Why the students crept"). The buffer keeps every step of an hour: 2.9 GB, which every
+# checkpoint carries, so checkpoints (and evaluations) come every 100k env steps (~9 min here), not every 20k.
+# 1M env steps take ~90 minutes on 2 CPU cores: `train.max_wall_minutes=60` is the hour of the bar.
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm", "algo.student_drive=0.5", "algo.student_mix=episode",
     "obs.object_selection=route", "algo.buffer_size=600000", "data.synthetic.junction_parking=0.6",
     "data.synthetic.max_parked=40", "data.synthetic.parked_fraction=0.4,0.9", "data.synthetic.sdc_slow_start=1",
-    "data.synthetic.traffic_density=1.5")
+    "data.synthetic.traffic_density=1.5", "train.total_env_steps=1000000", "train.eval_every=100000",
+    "train.checkpoint_every=100000")
 
 
 def selfplay_config(encoder: str | None, reward: str, algo_preset: str) -> TrainConfig:
