@@ -29,6 +29,8 @@ CONFIGS = [  # (preset, overrides); a PPO chunk step is a whole update (2,560 en
     ("ppo-none", ["algo.batch_size=64"]),
     ("ppo-mlp", []),
     ("bc-mlp", []),
+    # the default preset: BC labelled by PDM-Closed every step, IDM training traffic, a 600k-transition buffer
+    ("bc-dagger", []),
     ("bc_sac-lq", []),
     # self-play: one policy drives the SDC and up to K - 1 controllable agents of each of num_envs scenes; env steps
     # count scenes, agent steps the agents acting in them (the synthetic scenes hold ~7 movable agents)
