@@ -43,6 +43,7 @@ def test_loader_puts_each_agents_path_in_its_slot(parked_shards):
     assert load_batch(small_data_config(parked_shards)).agent_paths is None  # not loaded unless asked
 
 
+@pytest.mark.slow  # 11-13 s of the default suite's 10-minute budget; runs in CI's slow stage
 def test_idm_agent_stops_behind_a_parked_car_instead_of_replaying_into_it(parked_shards):
     result, x = _run("expert", parked_shards, "reactive")
     assert result.summary["mode"] == "reactive" and result.summary["mode_options"]["agents"] == "idm"

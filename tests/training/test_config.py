@@ -106,6 +106,7 @@ def test_the_dagger_preset_is_the_documented_bc_recipe_and_overrides_still_apply
     assert (config.algo, config.network.name) == ("bc", "mlp")
     assert (config.train.teacher, config.train.traffic) == ("pdm_state", "idm")
     assert (config.algo_config.student_drive, config.algo_config.student_mix) == (0.5, "episode")
+    assert config.algo_config.updates_per_step == 4  # half of BC's: steadier on real scenes (docs/learning.md)
     assert config.algo_config.buffer_size == 600_000 and config.obs.object_selection == "route"
     assert config.data.synthetic.sdc_slow_start == 1.0 and config.data.synthetic.max_parked == 40
     # checkpoints carry the 2.9 GB buffer: far apart; an hour's budget, not the step count, ends a run here
@@ -120,7 +121,7 @@ def test_the_dagger_preset_is_the_documented_bc_recipe_and_overrides_still_apply
 def test_vmax_sim_train_without_a_preset_runs_the_dagger_recipe():
     from click.testing import CliRunner
 
-    from cli.vmax_cli import main
+    from vmax_cli.vmax_cli import main
     from vmax_sim.training.config import DEFAULT_PRESET
 
     assert DEFAULT_PRESET == "bc-dagger" and preset_config() == preset_config("bc-dagger")

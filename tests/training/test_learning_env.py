@@ -67,6 +67,7 @@ def test_expert_episode_truncates_with_positive_return_and_keeps_its_last_observ
     assert not np.allclose(out.next_observation.sdc[-1, 1], out.observation.sdc[0, 1])  # braked to a stop
 
 
+@pytest.mark.slow  # 11-13 s of the default suite's 10-minute budget; runs in CI's slow stage
 def test_collision_terminates_with_the_safety_penalty():
     # keep 10 m/s: the SDC of the braking scenario (episode 1) hits the stopped car
     out, _ = run(lambda state: jnp.zeros((2, 2)) + ENV.core.dynamics.normalize(jnp.zeros(2)), 60)
