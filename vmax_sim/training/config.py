@@ -184,8 +184,8 @@ def pool_refresh(config: TrainConfig) -> int:
     return int(min(config.train.pool_size, max(1, -(-simulator_steps // config.env.episode_length))))
 
 
-# what `vmax-sim train` runs without --preset: the recipe that learnt best in an hour on 2 CPU cores (issue 22;
-# docs/learning.md: BC with DAgger, 97% / 0.947 held-out against SAC's 95% / 0.883). Its buffer keeps the hour.
+# what `vmax-sim train` runs without --preset: the recipe that learnt best in an hour on 2 CPU cores (issue 22,
+# docs/learning.md): on real scenes 86-90% where SAC's best hour scored 67.5%; held-out V-Max 0.90-0.92 (SAC 0.883)
 DEFAULT_PRESET = "bc-dagger"
 
 SECTIONS = ("algo", "network", "env", "obs", "reward", "data", "train", "selfplay")
