@@ -185,7 +185,7 @@ def pool_refresh(config: TrainConfig) -> int:
 
 
 # what `vmax-sim train` runs without --preset: the recipe that learnt best in an hour on 2 CPU cores (issue 22,
-# docs/learning.md): on real scenes 86-90% where SAC's best hour scored 67.5%; held-out V-Max 0.90-0.92 (SAC 0.883)
+# docs/learning.md): real scenes 86-90% (SAC's hour: 67.5% on 83 WOMD scenes); held-out V-Max 0.90-0.92 (SAC 0.883)
 DEFAULT_PRESET = "bc-dagger"
 
 SECTIONS = ("algo", "network", "env", "obs", "reward", "data", "train", "selfplay")
