@@ -282,7 +282,8 @@ def format_table(rows: Sequence[dict], total: dict) -> str:
         cells += [str(row["failures"].get(key, "n/a")) for key, _ in columns]
         cells.append(str(len(row["failed_episodes"])))
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", format_womd_clean(womd_clean(rows)), "", "Failure counts are judged episodes with: overlap, offroad, red_light, kinematic_infeasibility or "
+    lines += ["", format_womd_clean(womd_clean(rows)), "",
+              "Failure counts are judged episodes with: overlap, offroad, red_light, kinematic_infeasibility or "
               "wrong_way > 0.5; comfort < 0.5; driving_direction < 1 (0.5: 2-6 m against the lane within 1 s, "
               "0: 6 m or more); making_progress < 0.5.", ""]
     lines += format_failures(rows)
