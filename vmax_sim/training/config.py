@@ -185,7 +185,7 @@ def pool_refresh(config: TrainConfig) -> int:
 
 
 # what `vmax-sim train` runs without --preset: the recipe that learnt best in an hour on 2 CPU cores (issue 22,
-# docs/learning.md): real scenes 86-90% (SAC's hour: 67.5% on 83 WOMD scenes); held-out V-Max 0.90-0.92 (SAC 0.883)
+# docs/learning.md): real scenes 76-97%, mean 86.5 (SAC's hour: 67.5% on 83 WOMD scenes); held-out V-Max ~0.9
 DEFAULT_PRESET = "bc-dagger"
 
 SECTIONS = ("algo", "network", "env", "obs", "reward", "data", "train", "selfplay")
@@ -233,8 +233,8 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 
 
 # `bc-dagger`: the hour of docs/learning.md ("Why the students crept", "Half the updates") with 4 gradient updates
-# per batched env step instead of BC's 8: real scenes 86-90% from 400k env steps on (8 updates: 76-86%), held-out
-# synthetic 87-93% (8: 85-97%), and 25% more env steps per hour. The buffer keeps every step of an hour: 2.9 GB,
+# per batched env step instead of BC's 8: real scenes 75.9-96.6% from 300k env steps on over two seeds, mean 86.5
+# (8 updates, one seed: mean 80.7), held-out synthetic 74-93% (8: 85-97%), and 25% more env steps per hour. The buffer keeps every step of an hour: 2.9 GB,
 # which every checkpoint carries, so checkpoints (and evaluations) come every 100k env steps (~8 min here), not
 # every 20k. 1M env steps take ~80 minutes on 2 CPU cores: `train.max_wall_minutes=60` is the issue's hour.
 DAGGER_OVERRIDES = (
