@@ -236,7 +236,8 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # per batched env step instead of BC's 8: real scenes 75.9-96.6% from 300k env steps on over two seeds, mean 86.5
 # (8 updates, one seed: mean 80.7), held-out synthetic 74-93% (8: 85-97%), and 25% more env steps per hour. The
 # buffer keeps every step of an hour: 2.9 GB, which every checkpoint carries, so checkpoints (and evaluations) come
-# every 100k env steps (~8 min here), not every 20k. 1M env steps take ~80 minutes on 2 CPU cores: `train.max_wall_minutes=60` is the hour.
+# every 100k env steps (~8 min here), not every 20k. 1M env steps take ~80 minutes on 2 CPU cores:
+# `train.max_wall_minutes=60` is the hour.
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm", "algo.student_drive=0.5", "algo.student_mix=episode",
     "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=600000",
