@@ -113,6 +113,8 @@ def test_idm_is_registered_and_checks_its_dynamics():
     assert make_policy("idm", env).name == "idm" and not make_policy("idm", env).needs_observation
     with pytest.raises(ValueError, match="bicycle dynamics"):
         idm_policy(make_environment(EnvConfig(max_num_objects=8, dynamics="delta_local")))
+    no_reverse = make_environment(EnvConfig(max_num_objects=8, dynamics="bicycle_no_reverse"))
+    assert {make_policy(name, no_reverse).name for name in ("idm", "pdm", "constant")} == {"idm", "pdm", "constant"}
     with pytest.raises(ValueError, match="IDMConfig.time_headway"):
         IDMConfig(time_headway=0.0)
 

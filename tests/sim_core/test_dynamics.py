@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from vmax_sim.datatypes import Trajectory, select_timestep
 from vmax_sim.dynamics import (
     BICYCLE,
+    BICYCLE_NO_REVERSE,
     DELTA_GLOBAL,
     DELTA_LOCAL,
     DT,
@@ -54,6 +55,25 @@ def test_acceleration_from_rest_moves_half_a_t_squared():
     nxt = bicycle_forward(jnp.array([[2.0, 0.0]]), state_at(0.0, 0.0, 0.0, 0.0))
     assert float(nxt.x[0, 0]) == pytest.approx(0.5 * 2.0 * DT**2, abs=1e-7)  # 1 cm
     assert float(nxt.vel_x[0, 0]) == pytest.approx(0.2, abs=1e-6)
+
+
+def test_the_no_reverse_bicycle_brakes_to_a_stop_and_stays_there():
+    # full braking at rest: the plain bicycle backs up, the no-reverse one holds still
+    at_rest = state_at(5.0, 2.0, 0.0, 0.0)
+    backed = bicycle_forward(jnp.array([[-6.0, 0.1]]), at_rest)
+    assert float(backed.x[0, 0]) < 5.0 and float(backed.vel_x[0, 0]) < 0.0
+    held = BICYCLE_NO_REVERSE.forward(jnp.array([[-6.0, 0.1]]), at_rest)
+    assert float(held.x[0, 0]) == pytest.approx(5.0, abs=1e-7) and float(held.vel_x[0, 0]) == pytest.approx(0.0)
+    # braking harder than the speed allows ends the step at rest, not reversing: 1 m/s needs only -10 m/s^2 * dt
+    slow = BICYCLE_NO_REVERSE.forward(jnp.array([[-6.0, 0.0]]), state_at(0.0, 0.0, 0.0, 0.4))
+    assert float(slow.vel_x[0, 0]) == pytest.approx(0.0, abs=1e-6)
+    assert float(slow.x[0, 0]) == pytest.approx(0.02, abs=1e-6)  # v dt / 2 while stopping
+    # any other action (speeding up, braking within the speed) is the plain bicycle's
+    moving = state_at(1.0, -1.0, 0.3, 8.0)
+    for action in ([[2.0, 0.05]], [[-3.0, -0.02]]):
+        np.testing.assert_allclose(jax.tree.leaves(BICYCLE_NO_REVERSE.forward(jnp.array(action), moving)),
+                                   jax.tree.leaves(bicycle_forward(jnp.array(action), moving)))
+    assert get_dynamics("bicycle_no_reverse") is BICYCLE_NO_REVERSE and BICYCLE_NO_REVERSE.bounds == BICYCLE.bounds
 
 
 def test_constant_curvature_arc_is_exact():

@@ -5,10 +5,12 @@ from vmax_sim.dynamics.bicycle import (
     CURVATURE_BOUNDS,
     DT,
     bicycle_forward,
+    bicycle_forward_no_reverse,
     bicycle_inverse,
     bicycle_inverse_step,
     bicycle_tracking_inverse_step,
     heading_speed,
+    stop_at_zero,
     wrap_angle,
 )
 from vmax_sim.dynamics.delta import (
@@ -21,6 +23,8 @@ from vmax_sim.dynamics.delta import (
 )
 from vmax_sim.dynamics.model import (
     BICYCLE,
+    BICYCLE_NAMES,
+    BICYCLE_NO_REVERSE,
     DELTA_GLOBAL,
     DELTA_LOCAL,
     STATE,
@@ -33,6 +37,8 @@ from vmax_sim.dynamics.state import state_forward, state_inverse
 __all__ = [
     "ACCEL_BOUNDS",
     "BICYCLE",
+    "BICYCLE_NAMES",
+    "BICYCLE_NO_REVERSE",
     "CURVATURE_BOUNDS",
     "DELTA_GLOBAL",
     "DELTA_GLOBAL_BOUNDS",
@@ -42,6 +48,7 @@ __all__ = [
     "STATE",
     "DynamicsModel",
     "bicycle_forward",
+    "bicycle_forward_no_reverse",
     "bicycle_inverse",
     "bicycle_inverse_step",
     "bicycle_tracking_inverse_step",
@@ -52,6 +59,7 @@ __all__ = [
     "dynamics_names",
     "get_dynamics",
     "heading_speed",
+    "stop_at_zero",
     "state_forward",
     "state_inverse",
     "wrap_angle",

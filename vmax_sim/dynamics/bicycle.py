@@ -8,7 +8,7 @@ Over one step of `dt` the object drives a constant-curvature arc at constant acc
 where v is the velocity projected on the heading (negative when reversing). The chord form makes
 a constant-curvature, constant-speed log exact, and a smooth log accurate to O(dt^3) per step.
 `inverse` reads (a, k) off two consecutive states so that forward reproduces speed and heading
-exactly.
+exactly. `bicycle_forward_no_reverse` is the same car whose brake stops it: it never drives backwards.
 """
 
 from __future__ import annotations
@@ -52,6 +52,21 @@ def bicycle_forward(action: jax.Array, current: Trajectory, dt: float = DT) -> T
         vel_y=new_speed * jnp.sin(new_yaw),
         timestamp_micros=current.timestamp_micros + STEP_MICROS,
     )
+
+
+def stop_at_zero(accel: jax.Array, speed: jax.Array, dt: float = DT) -> jax.Array:
+    """Acceleration that brakes at most down to zero speed within one step (a brake does not reverse a car); an
+    object already reversing is brought back to rest. accel, speed (...) -> (...)"""
+    accel = jnp.maximum(accel, -jnp.maximum(speed, 0.0) / dt)
+    return jnp.where(speed < 0.0, -speed / dt, accel)
+
+
+def bicycle_forward_no_reverse(action: jax.Array, current: Trajectory, dt: float = DT) -> Trajectory:
+    """`bicycle_forward` with the acceleration passed through `stop_at_zero`: a learned driver's small negative
+    acceleration at rest holds it still instead of backing it into the car behind (docs/learning.md).
+    action (..., N, 2); current (..., N, 1) -> next (..., N, 1)."""
+    accel = stop_at_zero(action[..., 0:1], heading_speed(current), dt)
+    return bicycle_forward(jnp.concatenate([accel, action[..., 1:2]], axis=-1), current, dt)
 
 
 def bicycle_inverse_step(current: Trajectory, target: Trajectory, dt: float = DT) -> jax.Array:

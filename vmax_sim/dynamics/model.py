@@ -1,7 +1,7 @@
 """`DynamicsModel`: a named pair of pure functions (forward, inverse) plus action bounds.
 
-Registry names: "bicycle", "delta_local", "delta_global", "state". Action normalisation maps
-the documented bounds linearly onto [-1, 1] (policies output [-1, 1]).
+Registry names: "bicycle", "bicycle_no_reverse" (its brake stops the car), "delta_local", "delta_global", "state".
+Action normalisation maps the documented bounds linearly onto [-1, 1] (policies output [-1, 1]).
 """
 
 from __future__ import annotations
@@ -75,13 +75,17 @@ class DynamicsModel:
 BICYCLE = DynamicsModel("bicycle", 2, bicycle.bicycle_forward, bicycle.bicycle_inverse_step,
                         (bicycle.ACCEL_BOUNDS, bicycle.CURVATURE_BOUNDS),
                         expert_step_fn=bicycle.bicycle_tracking_inverse_step)
+BICYCLE_NO_REVERSE = dataclasses.replace(BICYCLE, name="bicycle_no_reverse",
+                                         forward_fn=bicycle.bicycle_forward_no_reverse)
+# models whose actions are (acceleration, curvature): what the planners and the constant policy drive with
+BICYCLE_NAMES = (BICYCLE.name, BICYCLE_NO_REVERSE.name)
 DELTA_LOCAL = DynamicsModel("delta_local", 3, delta.delta_local_forward, delta.delta_local_inverse_step,
                             delta.DELTA_LOCAL_BOUNDS)
 DELTA_GLOBAL = DynamicsModel("delta_global", 3, delta.delta_global_forward, delta.delta_global_inverse_step,
                              delta.DELTA_GLOBAL_BOUNDS)
 STATE = DynamicsModel("state", 5, state.state_forward, state.state_inverse_step, None)
 
-_REGISTRY = {model.name: model for model in (BICYCLE, DELTA_LOCAL, DELTA_GLOBAL, STATE)}
+_REGISTRY = {model.name: model for model in (BICYCLE, BICYCLE_NO_REVERSE, DELTA_LOCAL, DELTA_GLOBAL, STATE)}
 
 
 def get_dynamics(name: str) -> DynamicsModel:

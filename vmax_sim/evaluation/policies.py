@@ -14,6 +14,7 @@ from collections.abc import Callable
 import jax.numpy as jnp
 
 from vmax_sim.datatypes import Action, sdc_action
+from vmax_sim.dynamics import BICYCLE_NAMES
 from vmax_sim.policies.base import ActionFn, Policy
 
 POLICY_NAMES = ("expert", "constant", "idm", "pdm", "random")
@@ -26,7 +27,7 @@ def expert_policy(env) -> Policy:
 
 def constant_policy(env) -> Policy:
     """Keeps the current speed and heading (zero action of the bicycle / delta models)."""
-    if env.dynamics.name not in ("bicycle",):
+    if env.dynamics.name not in BICYCLE_NAMES:
         raise ValueError(f"the constant policy needs the bicycle dynamics, not {env.dynamics.name!r}")
 
     def action_fn(params, state, observation, key):

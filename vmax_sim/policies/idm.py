@@ -22,7 +22,8 @@ import jax.numpy as jnp
 
 from scenariomax.schema import TL_ARROW_CAUTION, TL_ARROW_STOP, TL_CAUTION, TL_FLASHING_STOP, TL_STOP
 from vmax_sim.datatypes import Action, SimulatorState, sdc_action
-from vmax_sim.dynamics.bicycle import ACCEL_BOUNDS, CURVATURE_BOUNDS, DT
+from vmax_sim.dynamics import BICYCLE_NAMES
+from vmax_sim.dynamics.bicycle import ACCEL_BOUNDS, CURVATURE_BOUNDS, DT, stop_at_zero
 from vmax_sim.geometry.transforms import to_local_points
 from vmax_sim.policies.base import Policy
 from vmax_sim.policies.route import (
@@ -100,8 +101,7 @@ def idm_acceleration(speed: jax.Array, desired_speed: jax.Array, gap: jax.Array,
 def bounded_acceleration(accel: jax.Array, speed: jax.Array, config: IDMConfig, dt: float) -> jax.Array:
     """Clip to [-max_decel, max_accel] and never brake below zero speed within one step of dt. (...) -> (...)."""
     accel = jnp.clip(accel, -config.max_decel, config.max_accel)
-    accel = jnp.maximum(accel, -jnp.maximum(speed, 0.0) / dt)  # brake at most down to zero speed
-    accel = jnp.where(speed < 0.0, -speed / dt, accel)  # reversing (never planned): back to zero
+    accel = stop_at_zero(accel, speed, dt)  # reversing is never planned
     return jnp.clip(accel, *ACCEL_BOUNDS)
 
 
@@ -205,7 +205,7 @@ def idm_action(state: SimulatorState, config: IDMConfig = IDMConfig(), first_tim
 
 
 def check_bicycle(env, name: str) -> None:
-    if env.dynamics.name != "bicycle":
+    if env.dynamics.name not in BICYCLE_NAMES:
         raise ValueError(f"the {name} policy needs the bicycle dynamics, not {env.dynamics.name!r}")
 
 
