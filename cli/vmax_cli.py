@@ -475,10 +475,10 @@ def _realism_run(run_dir: str, data: str | None, print_fn):
     from vmax_sim.training.run_policy import load_trained_policy
 
     loaded = load_trained_policy(run_dir)
-    env, learner = components(loaded.config)
+    env = components(loaded.config)[0]
     path = _realism_data(data, loaded.config.data.num_objects, print_fn) if data else resolve_eval_data(
         loaded.config, print_fn)
-    return TrainedRun(name=loaded.policy.name, learner=learner, params=loaded.params, env_config=env.env_config,
+    return TrainedRun(name=loaded.policy.name, learner=loaded.learner, params=loaded.params, env_config=env.env_config,
                       obs_config=loaded.config.obs, data_config=data_config(loaded.config, path, batch_size=1))
 
 

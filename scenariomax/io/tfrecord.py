@@ -121,7 +121,8 @@ class _Gunzipped:
             raise _record_error(self._name, f"truncated gzip data (the file ends at byte {self._stream.position}, "
                                             "inside a compressed record)") from None
         except (gzip.BadGzipFile, zlib.error) as error:
-            raise _record_error(self._name, f"damaged gzip data before byte {self._stream.position} ({error})") from None
+            raise _record_error(self._name,
+                                f"damaged gzip data before byte {self._stream.position} ({error})") from None
 
 
 def decompressed(stream: BinaryIO, name: str) -> BinaryIO | _Gunzipped:

@@ -55,6 +55,8 @@ from vmax_sim.training.config import (
     config_to_dict,
     pool_refresh,
 )
+from vmax_sim.training.ensemble import RECORD_FILE as ENSEMBLE_RECORD
+from vmax_sim.training.ensemble import EnsembleCheckpoints, is_ensemble
 from vmax_sim.training.interrupt import StopRequests
 from vmax_sim.training.logger import RunLogger
 from vmax_sim.training.loop import (
@@ -578,6 +580,12 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
                  f"{per_chunk:,})")
     bar = _Progress(target, env_steps, progress)
     best = BestCheckpoint(run_dir) if loop.keep_best else None
+    ensemble = EnsembleCheckpoints(run_dir, loop.ensemble) if loop.ensemble else None
+
+    def save_checkpoint(env_steps: int, carry, host: dict) -> None:  # the run's checkpoint, and an ensemble member
+        store.save(env_steps, carry, host, with_buffer=loop.save_buffer)
+        if ensemble is not None:
+            ensemble.add(env_steps, carry, host)
     wall_before = float(host["wall_s"])
 
     def host_record(wall_s: float) -> dict:  # what a checkpoint keeps of the host side
@@ -634,7 +642,7 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
                     release_freed_memory()
                 if env_steps - last_checkpoint >= loop.checkpoint_every or last_chunk:
                     release_freed_memory()
-                    store.save(env_steps, carry, host_record(scalars["wall_s"]), with_buffer=loop.save_buffer)
+                    save_checkpoint(env_steps, carry, host_record(scalars["wall_s"]))
                     last_checkpoint = env_steps
                     release_freed_memory()
                 if last_chunk and stopped != "total_env_steps":
@@ -648,7 +656,7 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
             logger.flush()
     wall_s = wall_before + time.perf_counter() - start
     if stopped == "max_wall_minutes" and last_checkpoint != env_steps:  # the budget ran out before the first chunk
-        store.save(env_steps, carry, host_record(wall_s), with_buffer=loop.save_buffer)
+        save_checkpoint(env_steps, carry, host_record(wall_s))
     finished = env_steps >= loop.total_env_steps or stopped == "max_wall_minutes"
     if stopped == "max_wall_minutes":
         print_fn(f"stopped at the wall-clock budget (train.max_wall_minutes={loop.max_wall_minutes:g}) after "
@@ -656,7 +664,7 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
     if stopped == "interrupted":
         print_fn(f"{stop.signal_name or 'a stop request'}: checkpoint saved at {env_steps:,} env steps in "
                  f"{store.directory / str(env_steps)}; continue with: vmax-sim train --resume {run_dir}")
-    final = None
+    final = final_ensemble = None
     carry, pool = carry.replace(buffer=None), None  # done with (the last checkpoint holds the buffer): evaluate without
     release_freed_memory()
     if finished:
@@ -665,6 +673,8 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
             best.offer(env_steps, final, carry, host_record(wall_s))
             print_fn(f"best held-out V-Max score {best.score:.3f}: its checkpoint is in {best.directory} "
                      f"(vmax-sim evaluate --policy {best.directory})")
+        if ensemble is not None and is_ensemble(ensemble.directory):
+            final_ensemble = evaluator.run_ensemble(ensemble.directory)
         if primary:
             evaluator.plot(run_dir / "learning_curve.png", logger.rows)
     logger.close()
@@ -674,6 +684,8 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
                "reward": config.reward.preset, "env_steps": env_steps, "wall_s": wall_s,
                "median_env_steps_per_s": sps, "peak_rss_mb": peak_rss_mb(), "finished": finished,
                "stopped": stopped, "final_evaluation": final}
+    if final_ensemble is not None:
+        summary["ensemble_evaluation"] = final_ensemble
     if config.is_selfplay:
         summary["selfplay_evaluation"] = evaluator.selfplay_summary
     if primary:
@@ -746,6 +758,22 @@ class _Evaluator:
         self.log.log(env_steps, row)
         self.print_fn(line)
         return summary
+
+    def run_ensemble(self, directory: Path) -> dict:
+        """Held-out evaluation of the ensemble in `directory` (RUN/ensemble), printed, not logged in eval.csv.
+        -> its summary, with the members' env steps"""
+        from vmax_sim.evaluation.evaluate import evaluate
+        from vmax_sim.training.run_policy import load_trained_policy
+
+        loaded = load_trained_policy(directory)
+        members = json.loads((directory / ENSEMBLE_RECORD).read_text())["members"]
+        summary = evaluate(loaded.policy, self.data, data_config=self.data, env_config=self.env_config,
+                           obs_config=self.config.obs, num_scenarios=self.config.train.eval_scenarios,
+                           policy_params=loaded.params).summary
+        self.print_fn(f"ensemble of the checkpoints at {', '.join(f'{m:,}' for m in members)} env steps: accuracy "
+                      f"{summary['accuracy']:.3f}  V-Max score {summary['vmax_score']:.3f}  ({summary['num_episodes']} "
+                      f"held-out episodes; vmax-sim evaluate --policy {directory})")
+        return {**summary, "members": members}
 
     def _selfplay(self, params) -> dict:
         """One policy drives every agent of the held-out scenes (vmax_sim.evaluation.selfplay)."""

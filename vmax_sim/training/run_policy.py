@@ -23,6 +23,7 @@ from vmax_sim.map_index.structure import MapIndexConfig
 from vmax_sim.observation import LIGHT_FEATURES, OBJECT_FEATURES, ROADGRAPH_FEATURES, Observation
 from vmax_sim.policies.base import Policy
 from vmax_sim.training.checkpoint import CheckpointStore
+from vmax_sim.training.ensemble import ensemble_learner, is_ensemble, stack_params
 from vmax_sim.training.run import (
     components,
     data_config,
@@ -37,28 +38,43 @@ class LoadedPolicy:
     policy: Policy
     params: object
     config: object  # the run's TrainConfig
-    env_steps: int  # checkpoint step the parameters come from
+    env_steps: int  # checkpoint step the parameters come from (an ensemble's newest member)
+    learner: object  # whose act takes `params` (an ensemble's: the members' mean action, params stacked)
 
 
 def load_trained_policy(run_dir: str | Path, step: int | None = None) -> LoadedPolicy:
-    """The policy of a training run directory at its latest (or the given) checkpoint."""
+    """The policy of a training run directory at its latest (or the given) checkpoint; of an ensemble directory
+    (RUN/ensemble, `train.ensemble`), the mean action of all its members."""
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
     store = CheckpointStore(run_dir / "checkpoints")
+    env, learner = components(config)
+    name = f"{config.algo}-{config.network.name}@{run_dir.name}"
+    if is_ensemble(run_dir) and step is None:
+        steps = sorted(int(s) for s in store.manager.all_steps())
+        if not steps:
+            raise InputError(f"{run_dir}: the ensemble has no member yet")
+        params = stack_params([_restore_params(store, s, config, env, learner, run_dir) for s in steps])
+        learner = ensemble_learner(learner)
+        return LoadedPolicy(policy=trained_policy(learner, name), params=params, config=config, env_steps=steps[-1],
+                            learner=learner)
     step = store.latest_step() if step is None else step
     if step is None:
         raise InputError(f"{run_dir}: the run has no checkpoint yet")
-    env, learner = components(config)
-    example = _example_observation(config, env)
-    like = jax.eval_shape(learner.init, jax.random.PRNGKey(0), example)
+    params = _restore_params(store, step, config, env, learner, run_dir)
+    return LoadedPolicy(policy=trained_policy(learner, name), params=params, config=config, env_steps=int(step),
+                        learner=learner)
+
+
+def _restore_params(store: CheckpointStore, step: int, config, env, learner, run_dir: Path):
+    """The policy parameters of one checkpoint of the run."""
+    like = jax.eval_shape(learner.init, jax.random.PRNGKey(0), _example_observation(config, env))
     try:
         state = store.restore_learner(step, like)
     except (ValueError, KeyError) as error:
         raise InputError(f"{run_dir}: checkpoint {step} does not match this version's {config.algo} / "
                          f"{config.network.name} networks ({str(error)[:120]})") from None
-    name = f"{config.algo}-{config.network.name}@{run_dir.name}"
-    return LoadedPolicy(policy=trained_policy(learner, name), params=learner.policy_params(state), config=config,
-                        env_steps=int(step))
+    return learner.policy_params(state)
 
 
 def _example_observation(config, env):
@@ -113,7 +129,8 @@ def evaluate_selfplay_run(run_dir: str | Path, data: str | None = None, num_scen
     loaded = load_trained_policy(run_dir, step)
     config = loaded.config
     path = data or resolve_eval_data(config, lambda line: print(line, file=sys.stderr))
-    env, act = selfplay_env_and_act(config)
+    env = selfplay_env_and_act(config)[0]
+    act = lambda params, observation, key: loaded.learner.act(params, observation, key, True)  # noqa: E731
     data_settings = data_config(config, path, batch_size=batch_size, include_agent_paths=True)
     total = expected_num_scenarios(path, num_scenarios) if progress else None
     with Progress(f"self-play {Path(run_dir).name}", total, "scenarios", enabled=progress) as shown:

@@ -63,7 +63,8 @@ class SyntheticKnobs:
         _check_number("driver_style_spread", self.driver_style_spread, 0.0, 3.0)
         _check_range("parked_fraction", self.parked_fraction, 0.0, 1.0)
         if isinstance(self.max_parked, bool) or not isinstance(self.max_parked, int) or not 0 <= self.max_parked <= 48:
-            raise ValueError(f"synthetic knob max_parked: expected a whole number from 0 to 48, got {self.max_parked!r}")
+            raise ValueError(f"synthetic knob max_parked: expected a whole number from 0 to 48, "
+                             f"got {self.max_parked!r}")
         _check_number("junction_parking", self.junction_parking, 0.0, 1.0)
         _check_range("walkers_per_crosswalk", self.walkers_per_crosswalk, 0.0, 12.0)
         _check_number("sdc_slow_start", self.sdc_slow_start, 0.0, 1.0)

@@ -234,7 +234,8 @@ def test_driver_style_spread_widens_the_traits_around_their_centres():
     ({"topology_weights": "spaghetti:1"}, "topology_weights"), ({"topology_weights": "merge:0"}, "topology_weights"),
     ({"topology_weights": "merge:x"}, "topology_weights"),
     ({"max_parked": 2.5}, "max_parked"), ({"max_parked": 99}, "max_parked"), ({"max_parked": True}, "max_parked"),
-    ({"junction_parking": 1.5}, "junction_parking"), ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"), ({"sdc_slow_start": -0.1}, "sdc_slow_start"),
+    ({"junction_parking": 1.5}, "junction_parking"), ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"),
+    ({"sdc_slow_start": -0.1}, "sdc_slow_start"),
 ])
 def test_bad_knobs_raise_one_line_naming_the_knob(kwargs, name):
     with pytest.raises(ValueError, match=name) as caught:

@@ -1,0 +1,66 @@
+"""train.ensemble: RUN/ensemble holds the policies of the last checkpoints; their mean action drives."""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from tests.training.conftest import tiny_config
+from vmax_sim.agents.types import Learner
+from vmax_sim.training import train
+from vmax_sim.training.ensemble import ensemble_learner, is_ensemble, stack_params
+from vmax_sim.training.run_policy import evaluate_run, load_trained_policy
+
+
+def _linear_learner() -> Learner:
+    """act = tanh(obs @ w): enough to see what the ensemble does with its members."""
+    def act(params, observation, key, deterministic):
+        return jnp.tanh(observation @ params["w"])
+
+    return Learner(init=None, update=None, act=act, policy_params=lambda state: state,
+                   act_with_info=lambda *args: (act(*args[:4]), {}))
+
+
+def test_the_ensemble_acts_with_the_mean_of_its_members_actions():
+    learner = _linear_learner()
+    members = [{"w": jnp.full((3, 2), value)} for value in (0.1, -0.3, 0.5)]
+    observation = jnp.array([[1.0, 2.0, 0.5], [0.0, -1.0, 1.0]])  # (B=2, 3)
+    key = jax.random.PRNGKey(0)
+    mean = np.mean([learner.act(member, observation, key, True) for member in members], axis=0)
+    ensemble = ensemble_learner(learner)
+    np.testing.assert_allclose(ensemble.act(stack_params(members), observation, key, True), mean, rtol=1e-6)
+    # one member alone drives as itself
+    single = stack_params(members[:1])
+    np.testing.assert_allclose(ensemble.act(single, observation, key, True), learner.act(members[0], observation,
+                                                                                          key, True), rtol=1e-6)
+    assert ensemble.value is None
+
+
+@pytest.mark.slow  # ~70 s on 2 cores (a tiny BC run, its held-out evaluations and the ensemble's)
+def test_a_run_keeps_its_last_checkpoints_as_an_ensemble_that_evaluates_as_recorded(synthetic_shards, tmp_path):
+    config = tiny_config(synthetic_shards, "bc", "train.total_env_steps=80", "train.chunk_steps=2",
+                         "train.checkpoint_every=16", "train.ensemble=3", "train.keep_best=false")
+    run = tmp_path / "run"
+    result = train(config, run, progress=False, print_fn=lambda line: None)
+    directory = run / "ensemble"
+    assert is_ensemble(directory) and not is_ensemble(run)
+    record = json.loads((directory / "ensemble.json").read_text())
+    kept = sorted(int(p.name) for p in (directory / "checkpoints").iterdir() if p.name.isdigit())
+    assert record["members"] == kept and len(kept) == 3 and kept[-1] == result.env_steps  # the last three
+    assert not any((directory / "checkpoints" / str(step) / "replay").exists() for step in kept)
+    loaded = load_trained_policy(directory)
+    assert jax.tree.leaves(loaded.params)[0].shape[0] == 3  # the members' parameters, stacked
+    # the run's summary holds the ensemble's held-out evaluation; evaluated again as a run, it scores the same
+    summary = result.summary["ensemble_evaluation"]
+    assert summary["members"] == kept
+    again = evaluate_run(directory, num_scenarios=config.train.eval_scenarios,
+                         batch_size=config.train.eval_batch_size)
+    assert again.summary["vmax_score"] == pytest.approx(summary["vmax_score"], abs=1e-5)
+    # and it drives differently from its newest member alone
+    newest = load_trained_policy(run, step=kept[-1])
+    assert not np.allclose(jax.tree.leaves(loaded.params)[0][-1], jax.tree.leaves(loaded.params)[0][0])
+    assert newest.env_steps == loaded.env_steps
