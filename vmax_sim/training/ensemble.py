@@ -3,9 +3,10 @@
 A student's score swings from one checkpoint to the next on scenes unlike its training scenes (docs/learning.md:
 real-scene accuracy 82.8-96.6% 100k env steps apart), and averaging the checkpoints' *weights* did not steady it.
 Averaging their *actions* steadies it: on the real scenes the mean action of a run's last four checkpoints scored
-above its members' mean in each of four hours (accuracy 86.2-96.6%, mean 92.2; single checkpoints: mean 86.8). RUN/ensemble/ is a run directory of its own (config.json,
-checkpoints/<env steps>/ of the last N checkpoints without the replay buffer, ensemble.json naming them):
-`vmax-sim evaluate --policy RUN/ensemble` evaluates the ensemble like any run.
+above its members' mean in each of four hours (accuracy 86.2-96.6%, mean 92.2; single checkpoints: mean 86.8).
+RUN/ensemble/ is a run directory of its own (config.json, checkpoints/<env steps>/ of the last N checkpoints without
+the replay buffer, ensemble.json naming them): `vmax-sim evaluate --policy RUN/ensemble` evaluates the ensemble like
+any run.
 """
 
 from __future__ import annotations
@@ -71,4 +72,12 @@ class EnsembleCheckpoints:
         return members
 
 
-__all__ = ["ENSEMBLE_DIR", "EnsembleCheckpoints", "ensemble_learner", "is_ensemble", "stack_params"]
+def member_params(directory: Path, like, policy_params) -> tuple[object, list[int]]:
+    """The policy parameters of every member of the ensemble in `directory`, stacked (M, ...), and their env steps.
+    `like`: a learner state of the run's shapes; `policy_params`: the learner's state -> parameters."""
+    store = CheckpointStore(Path(directory) / "checkpoints")
+    steps = sorted(int(step) for step in store.manager.all_steps())
+    return stack_params([policy_params(store.restore_learner(step, like)) for step in steps]), steps
+
+
+__all__ = ["ENSEMBLE_DIR", "EnsembleCheckpoints", "ensemble_learner", "is_ensemble", "member_params", "stack_params"]

@@ -55,8 +55,7 @@ from vmax_sim.training.config import (
     config_to_dict,
     pool_refresh,
 )
-from vmax_sim.training.ensemble import RECORD_FILE as ENSEMBLE_RECORD
-from vmax_sim.training.ensemble import EnsembleCheckpoints, is_ensemble
+from vmax_sim.training.ensemble import EnsembleCheckpoints, ensemble_learner, is_ensemble, member_params
 from vmax_sim.training.interrupt import StopRequests
 from vmax_sim.training.logger import RunLogger
 from vmax_sim.training.loop import (
@@ -674,7 +673,8 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
             print_fn(f"best held-out V-Max score {best.score:.3f}: its checkpoint is in {best.directory} "
                      f"(vmax-sim evaluate --policy {best.directory})")
         if ensemble is not None and is_ensemble(ensemble.directory):
-            final_ensemble = evaluator.run_ensemble(ensemble.directory)
+            params, members = member_params(ensemble.directory, carry.learner, learner.policy_params)
+            final_ensemble = evaluator.run_ensemble(params, members, ensemble.directory)
         if primary:
             evaluator.plot(run_dir / "learning_curve.png", logger.rows)
     logger.close()
@@ -759,17 +759,16 @@ class _Evaluator:
         self.print_fn(line)
         return summary
 
-    def run_ensemble(self, directory: Path) -> dict:
-        """Held-out evaluation of the ensemble in `directory` (RUN/ensemble), printed, not logged in eval.csv.
-        -> its summary, with the members' env steps"""
+    def run_ensemble(self, params, members: list[int], directory: Path) -> dict:
+        """Held-out evaluation of the ensemble of `members` (their parameters stacked: `params`), printed, not
+        logged in eval.csv. -> its summary, with the members' env steps"""
         from vmax_sim.evaluation.evaluate import evaluate
-        from vmax_sim.training.run_policy import load_trained_policy
+        from vmax_sim.evaluation.trained import trained_policy
 
-        loaded = load_trained_policy(directory)
-        members = json.loads((directory / ENSEMBLE_RECORD).read_text())["members"]
-        summary = evaluate(loaded.policy, self.data, data_config=self.data, env_config=self.env_config,
+        policy = trained_policy(ensemble_learner(components(self.config)[1]), name=f"{self.policy.name}-ensemble")
+        summary = evaluate(policy, self.data, data_config=self.data, env_config=self.env_config,
                            obs_config=self.config.obs, num_scenarios=self.config.train.eval_scenarios,
-                           policy_params=loaded.params).summary
+                           policy_params=params).summary
         self.print_fn(f"ensemble of the checkpoints at {', '.join(f'{m:,}' for m in members)} env steps: accuracy "
                       f"{summary['accuracy']:.3f}  V-Max score {summary['vmax_score']:.3f}  ({summary['num_episodes']} "
                       f"held-out episodes; vmax-sim evaluate --policy {directory})")

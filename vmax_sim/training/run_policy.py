@@ -23,7 +23,7 @@ from vmax_sim.map_index.structure import MapIndexConfig
 from vmax_sim.observation import LIGHT_FEATURES, OBJECT_FEATURES, ROADGRAPH_FEATURES, Observation
 from vmax_sim.policies.base import Policy
 from vmax_sim.training.checkpoint import CheckpointStore
-from vmax_sim.training.ensemble import ensemble_learner, is_ensemble, stack_params
+from vmax_sim.training.ensemble import ensemble_learner, is_ensemble, member_params
 from vmax_sim.training.run import (
     components,
     data_config,
@@ -51,10 +51,14 @@ def load_trained_policy(run_dir: str | Path, step: int | None = None) -> LoadedP
     env, learner = components(config)
     name = f"{config.algo}-{config.network.name}@{run_dir.name}"
     if is_ensemble(run_dir) and step is None:
-        steps = sorted(int(s) for s in store.manager.all_steps())
-        if not steps:
+        if store.latest_step() is None:
             raise InputError(f"{run_dir}: the ensemble has no member yet")
-        params = stack_params([_restore_params(store, s, config, env, learner, run_dir) for s in steps])
+        like = jax.eval_shape(learner.init, jax.random.PRNGKey(0), _example_observation(config, env))
+        try:
+            params, steps = member_params(run_dir, like, learner.policy_params)
+        except (ValueError, KeyError) as error:
+            raise InputError(f"{run_dir}: the ensemble does not match this version's {config.algo} / "
+                             f"{config.network.name} networks ({str(error)[:120]})") from None
         learner = ensemble_learner(learner)
         return LoadedPolicy(policy=trained_policy(learner, name), params=params, config=config, env_steps=steps[-1],
                             learner=learner)
