@@ -11,11 +11,10 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
 from pathlib import Path
 
 from vmax_sim.training import distributed
-from vmax_sim.training.checkpoint import CheckpointStore
+from vmax_sim.training.checkpoint import CheckpointStore, write_policy_directory
 
 BEST_DIR = "best"
 RECORD_FILE = "best.json"
@@ -47,11 +46,9 @@ class BestCheckpoint:
         if self._store is None:
             self._store = CheckpointStore(self.directory / "checkpoints", keep=1)
         self._store.save(env_steps, carry.replace(buffer=None), host, with_buffer=False)
-        if distributed.is_primary():
-            shutil.copyfile(self.run_dir / "config.json", self.directory / "config.json")
-            record = {"env_steps": int(env_steps), "vmax_score": score, "accuracy": float(summary["accuracy"]),
-                      "accuracy_at_fault": float(summary["accuracy_at_fault"])}
-            (self.directory / RECORD_FILE).write_text(json.dumps(record, indent=2) + "\n")
+        record = {"env_steps": int(env_steps), "vmax_score": score, "accuracy": float(summary["accuracy"]),
+                  "accuracy_at_fault": float(summary["accuracy_at_fault"])}
+        write_policy_directory(self.run_dir, self.directory, RECORD_FILE, record)
         self.score = score
         return True
 

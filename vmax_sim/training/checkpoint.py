@@ -17,7 +17,9 @@ from __future__ import annotations
 import dataclasses
 import errno
 import functools
+import json
 import logging
+import shutil
 import warnings
 from pathlib import Path
 
@@ -27,6 +29,7 @@ import numpy as np
 import orbax.checkpoint as ocp
 
 from scenariomax.errors import InputError
+from vmax_sim.training import distributed
 from vmax_sim.training.loop import TrainCarry
 
 SLICE_BYTES = 4 * 2**20  # bytes moved between the device and a file at a time (larger: more memory, no faster)
@@ -258,3 +261,12 @@ class CheckpointStore:
         """Only the learner state (evaluation of a trained run)."""
         abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, like)
         return self.manager.restore(step, args=ocp.args.Composite(learner=ocp.args.StandardRestore(abstract))).learner
+
+
+def write_policy_directory(run_dir: Path, directory: Path, record_file: str, record: dict) -> None:
+    """Makes `directory` (a run's RUN/best or RUN/ensemble, its checkpoints already saved) a run directory of its own:
+    the run's config.json beside them and `record` as JSON in `record_file`. The primary process writes."""
+    if distributed.is_primary():
+        shutil.copyfile(Path(run_dir) / "config.json", Path(directory) / "config.json")
+        (Path(directory) / record_file).write_text(json.dumps(record, indent=2) + "\n")
+

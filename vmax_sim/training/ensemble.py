@@ -11,16 +11,13 @@ any run.
 
 from __future__ import annotations
 
-import json
-import shutil
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 
 from vmax_sim.agents.types import Learner
-from vmax_sim.training import distributed
-from vmax_sim.training.checkpoint import CheckpointStore
+from vmax_sim.training.checkpoint import CheckpointStore, write_policy_directory
 
 ENSEMBLE_DIR = "ensemble"
 RECORD_FILE = "ensemble.json"
@@ -56,26 +53,19 @@ class EnsembleCheckpoints:
     def __init__(self, run_dir: Path, size: int):
         self.run_dir = Path(run_dir)
         self.directory = self.run_dir / ENSEMBLE_DIR
+        self.store = CheckpointStore(self.directory / "checkpoints", keep=size)
         self.size = size
-        self._store: CheckpointStore | None = None  # opened at the first member
 
-    def add(self, env_steps: int, carry, host: dict) -> list[int]:
-        """Writes `carry`'s learner (its replay buffer left out) as the newest member. -> the members' env steps"""
-        if self._store is None:
-            self._store = CheckpointStore(self.directory / "checkpoints", keep=self.size)
-        self._store.save(env_steps, carry.replace(buffer=None), host, with_buffer=False)
-        members = sorted(int(step) for step in self._store.manager.all_steps())
-        if distributed.is_primary():
-            shutil.copyfile(self.run_dir / "config.json", self.directory / "config.json")
-            record = {"size": self.size, "members": members}
-            (self.directory / RECORD_FILE).write_text(json.dumps(record, indent=2) + "\n")
-        return members
+    def add(self, env_steps: int, carry, host: dict) -> None:
+        """Writes `carry`'s learner (its replay buffer left out) as the newest member."""
+        self.store.save(env_steps, carry.replace(buffer=None), host, with_buffer=False)
+        members = sorted(int(step) for step in self.store.manager.all_steps())
+        write_policy_directory(self.run_dir, self.directory, RECORD_FILE, {"size": self.size, "members": members})
 
 
-def member_params(directory: Path, like, policy_params) -> tuple[object, list[int]]:
-    """The policy parameters of every member of the ensemble in `directory`, stacked (M, ...), and their env steps.
+def member_params(store: CheckpointStore, like, policy_params) -> tuple[object, list[int]]:
+    """The policy parameters of every member in an ensemble's `store`, stacked (M, ...), and their env steps.
     `like`: a learner state of the run's shapes; `policy_params`: the learner's state -> parameters."""
-    store = CheckpointStore(Path(directory) / "checkpoints")
     steps = sorted(int(step) for step in store.manager.all_steps())
     return stack_params([policy_params(store.restore_learner(step, like)) for step in steps]), steps
 

@@ -673,7 +673,7 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
             print_fn(f"best held-out V-Max score {best.score:.3f}: its checkpoint is in {best.directory} "
                      f"(vmax-sim evaluate --policy {best.directory})")
         if ensemble is not None and is_ensemble(ensemble.directory):
-            params, members = member_params(ensemble.directory, carry.learner, learner.policy_params)
+            params, members = member_params(ensemble.store, carry.learner, learner.policy_params)
             final_ensemble = evaluator.run_ensemble(params, members, ensemble.directory)
         if primary:
             evaluator.plot(run_dir / "learning_curve.png", logger.rows)

@@ -50,35 +50,22 @@ def load_trained_policy(run_dir: str | Path, step: int | None = None) -> LoadedP
     store = CheckpointStore(run_dir / "checkpoints")
     env, learner = components(config)
     name = f"{config.algo}-{config.network.name}@{run_dir.name}"
-    if is_ensemble(run_dir) and step is None:
-        if store.latest_step() is None:
-            raise InputError(f"{run_dir}: the ensemble has no member yet")
-        like = jax.eval_shape(learner.init, jax.random.PRNGKey(0), _example_observation(config, env))
-        try:
-            params, steps = member_params(run_dir, like, learner.policy_params)
-        except (ValueError, KeyError) as error:
-            raise InputError(f"{run_dir}: the ensemble does not match this version's {config.algo} / "
-                             f"{config.network.name} networks ({str(error)[:120]})") from None
-        learner = ensemble_learner(learner)
-        return LoadedPolicy(policy=trained_policy(learner, name), params=params, config=config, env_steps=steps[-1],
-                            learner=learner)
+    ensemble = is_ensemble(run_dir) and step is None
     step = store.latest_step() if step is None else step
     if step is None:
-        raise InputError(f"{run_dir}: the run has no checkpoint yet")
-    params = _restore_params(store, step, config, env, learner, run_dir)
-    return LoadedPolicy(policy=trained_policy(learner, name), params=params, config=config, env_steps=int(step),
-                        learner=learner)
-
-
-def _restore_params(store: CheckpointStore, step: int, config, env, learner, run_dir: Path):
-    """The policy parameters of one checkpoint of the run."""
+        raise InputError(f"{run_dir}: the {'ensemble has no member' if ensemble else 'run has no checkpoint'} yet")
     like = jax.eval_shape(learner.init, jax.random.PRNGKey(0), _example_observation(config, env))
     try:
-        state = store.restore_learner(step, like)
+        if ensemble:
+            params, steps = member_params(store, like, learner.policy_params)
+            learner, step = ensemble_learner(learner), steps[-1]
+        else:
+            params = learner.policy_params(store.restore_learner(step, like))
     except (ValueError, KeyError) as error:
         raise InputError(f"{run_dir}: checkpoint {step} does not match this version's {config.algo} / "
                          f"{config.network.name} networks ({str(error)[:120]})") from None
-    return learner.policy_params(state)
+    return LoadedPolicy(policy=trained_policy(learner, name), params=params, config=config, env_steps=int(step),
+                        learner=learner)
 
 
 def _example_observation(config, env):
