@@ -242,8 +242,7 @@ class CheckpointStore:
     def restore(self, step: int, like: TrainCarry, with_buffer: bool) -> TrainCarry:
         """The carry saved at `step`, shaped like `like`; the replay is read into like.buffer (donated), or
         like.buffer itself when none was saved."""
-        abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, _tree(like))
-        learner = jax.tree.map(ocp.utils.to_shape_dtype_struct, like.learner)
+        abstract, learner = _abstract(_tree(like)), _abstract(like.learner)
         items = {"learner": ocp.args.StandardRestore(learner), "state": ocp.args.StandardRestore(abstract)}
         if with_buffer and like.buffer is not None:
             items["replay"] = ReplayRestore(like.buffer)
@@ -259,8 +258,23 @@ class CheckpointStore:
 
     def restore_learner(self, step: int, like) -> object:
         """Only the learner state (evaluation of a trained run)."""
-        abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, like)
+        abstract = _abstract(like)
         return self.manager.restore(step, args=ocp.args.Composite(learner=ocp.args.StandardRestore(abstract))).learner
+
+
+def _abstract(tree):
+    """Shape, dtype and sharding of every leaf, for a restore onto this machine's devices. A leaf without a
+    sharding (a shape from `jax.eval_shape`) gets the default device's: left out, orbax would use the sharding
+    saved in the checkpoint, and a run saved on a GPU would not restore on a CPU ("Topology mismatch")."""
+    default = jax.sharding.SingleDeviceSharding(jax.devices()[0])
+
+    def leaf(x):
+        struct = ocp.utils.to_shape_dtype_struct(x)
+        if getattr(struct, "sharding", None) is None and hasattr(struct, "shape"):
+            return jax.ShapeDtypeStruct(struct.shape, struct.dtype, sharding=default)
+        return struct
+
+    return jax.tree.map(leaf, tree)
 
 
 def write_policy_directory(run_dir: Path, directory: Path, record_file: str, record: dict) -> None:
