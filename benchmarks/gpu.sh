@@ -9,12 +9,17 @@
 #   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
 #     --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 -d .whl shapely google-crc32c tensorboardX
 # With no .whl/ it installs from the network instead (`pip install -e .[sim] jax[cuda12]`).
-# Usage: bash benchmarks/gpu.sh [LEARN_MINUTES]   (default 0.5)
+# Usage: bash benchmarks/gpu.sh [LEARN_MINUTES] [STAGES]   (default 0.5, "rows bench training learn")
+#   STAGES, any of: rows (self-play throughput), bench (simulator), training (SAC / PPO throughput),
+#   learn (the default preset for LEARN_MINUTES; its RUN/ensemble comes back as learn_ensemble.tgz.*:
+#   `cat learn_ensemble.tgz.* | tar xz` here, then `vmax-sim evaluate --policy ensemble --data REAL_SHARDS`), selfplay (self-play PPO taught by IDM, 64 scenes x 8 agents, for LEARN_MINUTES)
 set -uo pipefail
 cd "$(dirname "$0")/.."
 out="${OUT:-gpu-results}"
 mkdir -p "$out"
 learn_minutes="${1:-0.5}"
+stages=" ${2:-rows bench training learn} "
+want() { [[ "$stages" == *" $1 "* ]]; }
 site=/tmp/vmax-gpu-site
 log() { echo "[$(date +%H:%M:%S)] $*" | tee -a "$out/gpu.log"; }
 export PYTHONUNBUFFERED=1 VMAX_CACHE_DIR=/tmp/vmax-gpu-cache
@@ -41,24 +46,38 @@ cat "$out/device.txt"
 # a stage cut off by `timeout` leaves benchmarks/training.py's child (and its GPU memory) behind: end it
 stop_children() { pkill -f "benchmarks/training.py" 2>/dev/null; sleep 1; }
 
-log "self-play throughput rows: the CPU table's 8 x 8, then 256 x 32 scenes x agent slots"
+want rows && log "self-play throughput rows: the CPU table's 8 x 8, then 256 x 32 scenes x agent slots" &&
 timeout 200 "$py" benchmarks/training.py --chunks 3 --only "ppo-selfplay selfplay.max_agents=8,\
 ppo-selfplay selfplay.max_agents=32 algo.num_envs=256" \
   "$small" 2>>"$out/gpu.log" | tee "$out/selfplay.txt"
 stop_children
 
-log "simulator bench (batches 32 to 4096)"
+want bench && log "simulator bench (batches 32 to 4096)" &&
 timeout 70 vmax-sim bench --batch-sizes 32,1024,4096 2>>"$out/gpu.log" | tee "$out/bench.txt"
 
-log "training throughput rows (SAC and PPO, MLP encoder)"
+want training && log "training throughput rows (SAC and PPO, MLP encoder)" &&
 timeout 150 "$py" benchmarks/training.py --chunks 3 --only "sac-mlp,ppo-mlp" "$small" \
   2>>"$out/gpu.log" | tee "$out/training.txt"
 stop_children
 
-# the budget counts from the first training chunk: generating the held-out split and compiling come before it (~90 s)
-log "a short learning run (default preset, ${learn_minutes} min wall-clock budget)"
-timeout "$(python3 -c "print(int(${learn_minutes} * 60 + 120))")" vmax-sim train --out /tmp/vmax-gpu-learn \
-  --quiet "$small" train.max_wall_minutes="$learn_minutes" train.total_env_steps=100000000 >"$out/learn.log" 2>&1
-tail -5 "$out/learn.log"
-cp /tmp/vmax-gpu-learn/summary.json "$out/learn_summary.json" 2>/dev/null  # $OUT returns 8 files at most
+# the budget counts from the first training chunk: generating the splits and compiling come before it (~90 s)
+budget() { python3 -c "print(int(${learn_minutes} * 60 + ${1}))"; }
+if want learn; then
+  log "a learning run: the default preset, ${learn_minutes} min wall-clock budget, its own 2,000-scene split"
+  timeout "$(budget 240)" vmax-sim train --out /tmp/vmax-gpu-learn --quiet train.max_wall_minutes="$learn_minutes" \
+    train.total_env_steps=100000000 >"$out/learn.log" 2>&1
+  tail -8 "$out/learn.log"
+  cp /tmp/vmax-gpu-learn/summary.json "$out/learn_summary.json" 2>/dev/null
+  # the ensemble's checkpoints (~25 MB) in pieces under the 16 MB a returned file may have: `cat | tar xz` here
+  [ -d /tmp/vmax-gpu-learn/ensemble ] && tar czf - -C /tmp/vmax-gpu-learn ensemble | split -b 15m - "$out/learn_ensemble.tgz."
+fi
+if want selfplay; then
+  log "self-play PPO taught by IDM (64 scenes x 8 agents), ${learn_minutes} min wall-clock budget"
+  timeout "$(budget 240)" vmax-sim train --preset ppo-selfplay --out /tmp/vmax-gpu-selfplay --quiet \
+    algo.num_envs=64 train.max_wall_minutes="$learn_minutes" train.total_env_steps=100000000 \
+    >"$out/selfplay_learn.log" 2>&1
+  tail -8 "$out/selfplay_learn.log"
+  cp /tmp/vmax-gpu-selfplay/summary.json "$out/selfplay_summary.json" 2>/dev/null
+  cp /tmp/vmax-gpu-selfplay/eval.csv "$out/selfplay_eval.csv" 2>/dev/null
+fi
 log "done"

@@ -108,7 +108,7 @@ def test_first_minibatch_ratio_is_one(setup):
     loss = L.make_loss(make_networks(CONFIG, lambda: toy.ToyEncoder(8), 1), CONFIG)
     flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), rollout)
     batch = L.PPOBatch(obs=flat.obs, action=flat.action, log_prob=flat.log_prob, value=flat.value,
-                       advantage=jnp.ones(48), target=flat.value, mask=jnp.ones(48))
+                       advantage=jnp.ones(48), target=flat.value, mask=jnp.ones(48), expert_action=flat.expert_action)
     _, metrics = jax.jit(loss)(state.params, batch, jax.random.key(0))
     assert float(metrics["clip_fraction"]) == 0.0
     assert abs(float(metrics["approx_kl"])) < 1e-6
@@ -128,6 +128,37 @@ def test_masked_rows_do_not_change_the_update(setup):
     second, metrics_garbage = update(state, garbage, jax.random.key(3), bootstrap_value=bootstrap)
     toy.assert_trees_equal(first.params, second.params)
     assert float(metrics["value_loss"]) == float(metrics_garbage["value_loss"])
+
+
+def test_the_imitation_term_pulls_the_policy_mode_to_the_teacher_label(setup):
+    """With imitation_coef > 0 each update also fits mode(pi(s)) to the label in Transition.expert_action (the
+    rule teacher of self-play): a few updates on the same rollout bring the mode closer to it; masked rows count
+    for nothing."""
+    import dataclasses
+
+    _, state, rollout = setup
+    config = dataclasses.replace(CONFIG, imitation_coef=5.0, learning_rate=3e-3)
+    learner = make_learner("ppo", config, lambda: toy.ToyEncoder(8), toy.ACTION_DIM)
+    label = jnp.full(rollout.action.shape, 0.6)
+    taught = rollout.replace(expert_action=label)
+    bootstrap = learner.value(state.params, jax.tree.map(lambda x: x[-1], rollout.next_obs))
+    update = jax.jit(learner.update)
+
+    flat_obs = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), rollout.obs)
+
+    def distance(train_state):
+        mode = learner.act(learner.policy_params(train_state), flat_obs, jax.random.key(0), True)
+        return float(jnp.mean(jnp.abs(mode - 0.6)))
+
+    after, metrics = update(state, taught, jax.random.key(3), bootstrap_value=bootstrap)
+    for i in range(4):
+        after, metrics = update(after, taught, jax.random.key(4 + i), bootstrap_value=bootstrap)
+    assert "imitation_mse" in metrics and distance(after) < 0.5 * distance(state)
+    mask = (jnp.arange(rollout.reward.shape[1]) % 2 == 0).astype(jnp.float32)[None].repeat(rollout.reward.shape[0], 0)
+    noisy = taught.replace(mask=mask, expert_action=jnp.where(mask[..., None] > 0, label, -0.9))
+    first, _ = update(state, taught.replace(mask=mask), jax.random.key(3), bootstrap_value=bootstrap)
+    second, _ = update(state, noisy, jax.random.key(3), bootstrap_value=bootstrap)
+    toy.assert_trees_equal(first.params, second.params)
 
 
 def test_update_deterministic_and_no_retrace(setup):

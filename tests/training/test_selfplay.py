@@ -91,6 +91,40 @@ def test_a_crashed_agent_can_stay_as_a_still_obstacle(parked_shards, removed):
     assert crash == int(np.argmax(removed[1].terminated[:, 1]))  # same crash either way
 
 
+@pytest.mark.slow  # a third compilation of the step, with IDM on every agent's view (~40 s)
+def test_a_teacher_labels_every_agent_and_drives_them_round_the_parked_car(parked_shards):
+    """`SelfPlayEnv(teacher=...)` runs the rule driver on each agent's own view: its labels fill the rows of the
+    agents (none for the empty slot), and driven by them (evaluation with no policy) the agent that zero actions
+    drove into the parked car stops behind it, while the SDC still reaches its goal."""
+    from vmax_sim.evaluation.selfplay import episode_outcomes
+    from vmax_sim.policies.teacher import idm_teacher
+
+    pool = load_batch(small_data_config(parked_shards, include_agent_paths=True))
+    env = SelfPlayEnv(EnvConfig(max_num_objects=8), selfplay=SelfPlayConfig(max_agents=K), teacher=idm_teacher)
+    state = jax.jit(env.reset, static_argnums=1)(pool, 2, jax.random.PRNGKey(0))
+    labels = np.asarray(state.expert_action).reshape(2, K, -1)
+    assert np.abs(labels[:, :2]).max() > 0.01 and np.all(labels[:, 2] == 0)  # agents labelled, the empty slot not
+    outcomes = jax.device_get(jax.jit(lambda scenes, key: episode_outcomes(env, None, None, scenes, key))(
+        pool, jax.random.PRNGKey(0)))
+    assert not outcomes["overlap"][:, 1].any()  # it braked for the parked car
+    assert outcomes["goal_reached"][:, 0].all() and not outcomes["overlap"][:, 0].any()
+    with pytest.raises(ValueError, match="teacher"):  # no policy and no teacher: nothing would drive
+        episode_outcomes(SelfPlayEnv(EnvConfig(max_num_objects=8)), None, None, pool, jax.random.PRNGKey(0))
+
+
+def test_ppo_imitates_a_teacher_only_when_asked_and_in_any_order():
+    config = preset_config("ppo-selfplay")
+    taught = apply_overrides(config, ["train.teacher=idm", "train.teacher_speed_factor=1.4",
+                                      "algo.imitation_coef=1.0"])  # the teacher named before the coefficient
+    assert taught.train.teacher == "idm" and taught.algo_config.imitation_coef == 1.0
+    with pytest.raises(ValueError, match="imitation_coef"):
+        apply_overrides(config, ["train.teacher=idm"])  # PPO would not read the labels
+    with pytest.raises(ValueError, match="rule teacher"):
+        apply_overrides(config, ["algo.imitation_coef=1.0"])  # self-play has no log labels
+    with pytest.raises(ValueError, match="teacher_speed_factor"):
+        apply_overrides(taught, ["train.teacher=pdm"])  # the pace is the idm teacher's
+
+
 def test_the_selfplay_preset_is_ppo_over_every_controllable_agent():
     config = preset_config("ppo-selfplay")
     assert config.algo == "ppo" and config.env.controlled == "controllable" and config.is_selfplay

@@ -20,13 +20,14 @@ Everything is pure and jittable; `reset` and `step` take the scenario pool as an
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
 from flax import struct
 
 from vmax_sim.datatypes import Action, SimulatorState, update_timestep
-from vmax_sim.env.agent_view import agent_view, choose_agents, with_sdc_route
+from vmax_sim.env.agent_view import agent_view, choose_agents, stop_sign_points, with_sdc_route
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.environment import Environment
 from vmax_sim.env.learning import EPISODE_FLAGS, TERMINATION_METRICS, _has_noise, check_learning_settings
@@ -70,6 +71,7 @@ class SelfPlayState:
     arcs: jax.Array  # (B, K, 1, 2) float32, logged start / end arcs along each agent's own path
     metrics: dict  # name -> (B, K) float32, each agent's step metrics now
     observation: Observation  # (B * K, ...) the policy's input now (flat, scene-major)
+    expert_action: jax.Array  # (B * K, A) float32, the teacher's label of each agent now (zeros without a teacher)
     episode_return: jax.Array  # (B, K) float32
     episode_length: jax.Array  # (B, K) int32
     episode_flags: dict  # name -> (B, K) bool, AGENT_FLAGS seen so far
@@ -84,7 +86,7 @@ class AgentStepOutput:
 
     observation: Observation  # (BK, ...) before the step
     action: jax.Array  # (BK, A) float32 in [-1, 1]
-    expert_action: jax.Array  # (BK, A) zeros (self-play has no expert labels)
+    expert_action: jax.Array  # (BK, A) the teacher's label at the observation's state (zeros without a teacher)
     reward: jax.Array  # (BK,) float32
     terminated: jax.Array  # (BK,) bool, crash, off-road, red light or goal reached
     truncated: jax.Array  # (BK,) bool, the scene's time limit (and not terminated)
@@ -113,12 +115,16 @@ class SelfPlayEnv:
     selfplay: SelfPlayConfig = SelfPlayConfig()
     action_repeat: int = 1
     expert_labels: bool = False  # no log-following labels: kept for LearningEnv's interface
+    # a factory (core Environment) -> a rule driver, one state -> the SDC's action (A,) in [-1, 1]
+    # (`vmax_sim.policies.teacher`): run on every agent's view, it labels each agent's step (`expert_action`)
+    teacher: Callable[[Environment], Callable[[SimulatorState], jax.Array]] | None = None
 
     def __post_init__(self) -> None:
         check_learning_settings(self.env_config, self.reward_config, self.action_repeat)
         config = dataclasses.replace(self.env_config, normalize_actions=True, controlled="controllable")
         object.__setattr__(self, "env_config", config)
         object.__setattr__(self, "core", Environment(config))
+        object.__setattr__(self, "_teacher_fn", None if self.teacher is None else self.teacher(self.core))
 
     @property
     def action_dim(self) -> int:
@@ -139,6 +145,15 @@ class SelfPlayEnv:
     def _observe(self, sim: SimulatorState, slot: jax.Array, shared, key: jax.Array | None) -> Observation:
         noise_key = key if key is not None and _has_noise(self.obs_config) else None
         return sdc_observation(agent_view(sim, slot), shared, self.obs_config, noise_key)
+
+    def _labels(self, sim: SimulatorState, slots: jax.Array, acting: jax.Array) -> jax.Array:
+        """Each acting agent's teacher action on its own view (the stop signs handed over once, not the whole
+        roadgraph K times). (K, A) float32; zeros in the other rows and without a teacher."""
+        if self._teacher_fn is None:
+            return jnp.zeros((slots.shape[0], self.action_dim), jnp.float32)
+        signs = stop_sign_points(sim)
+        labels = jax.vmap(lambda slot: self._teacher_fn(agent_view(sim, slot, signs)))(slots)
+        return jnp.where(acting[:, None], labels, 0.0)
 
     def _goal(self, sim: SimulatorState, slot: jax.Array) -> jax.Array:
         """The agent's last logged position within the episode window. (2,)"""
@@ -175,7 +190,8 @@ class SelfPlayEnv:
         sim = sim.replace(object_metadata=sim.object_metadata.replace(is_controlled=is_agent, max_controlled=k))
         observation = jax.vmap(lambda slot, q: self._observe(sim, slot, q, None))(slots, shared)
         none = jnp.zeros(sim.num_objects, bool)
-        return sim, slots, present, present, none, none, goals, arcs, metrics, observation
+        labels = self._labels(sim, slots, present)
+        return sim, slots, present, present, none, none, goals, arcs, metrics, (observation, labels)
 
     def _move(self, sim: SimulatorState, slots: jax.Array, acting: jax.Array, action: jax.Array,
               gone: jax.Array, still: jax.Array) -> SimulatorState:
@@ -249,7 +265,8 @@ class SelfPlayEnv:
         keys = jax.random.split(key, slots.shape[0])
         observation = jax.vmap(lambda slot, q, k: self._observe(sim, slot, q, k))(slots, shared, keys)
         scene_done = truncated_scene | ~jnp.any(acting)
-        return sim, acting, gone, still, metrics, reward, terminated, truncated, flags, observation, scene_done
+        return (sim, acting, gone, still, metrics, reward, terminated, truncated, flags,
+                (observation, self._labels(sim, slots, acting)), scene_done)
 
     def _time_is_up(self, sim: SimulatorState) -> jax.Array:
         """The scene reached its time limit or the end of its log. () bool"""
@@ -262,11 +279,12 @@ class SelfPlayEnv:
         pool_size = pool.timestep.shape[0]
         scenes = jax.tree.map(lambda a: a[jnp.arange(batch_size) % pool_size], pool)
         parts = jax.vmap(self._start)(scenes, jax.random.split(key, batch_size))
-        sim, slots, present, active, gone, still, goals, arcs, metrics, observation = parts
+        sim, slots, present, active, gone, still, goals, arcs, metrics, (observation, labels) = parts
         shape = slots.shape
         return SelfPlayState(
             sim=sim, slots=slots, present=present, active=active, gone=gone, still=still, goal_xy=goals,
-            arcs=arcs, metrics=metrics, observation=_flat(observation), episode_return=jnp.zeros(shape),
+            arcs=arcs, metrics=metrics, observation=_flat(observation), expert_action=_flat(labels),
+            episode_return=jnp.zeros(shape),
             episode_length=jnp.zeros(shape, jnp.int32), episode_flags={n: jnp.zeros(shape, bool) for n in AGENT_FLAGS},
             next_scenario=jnp.asarray(batch_size % pool_size, jnp.int32), key=key)
 
@@ -278,7 +296,7 @@ class SelfPlayEnv:
         key, step_key = jax.random.split(state.key)
         outs = jax.vmap(self._advance)(state.sim, state.slots, state.active, state.gone, state.still, state.goal_xy,
                                        state.arcs, state.metrics, action, jax.random.split(step_key, batch))
-        sim, acting, gone, still, metrics, reward, terminated, truncated, seen, next_obs, scene_done = outs
+        sim, acting, gone, still, metrics, reward, terminated, truncated, seen, (next_obs, labels), scene_done = outs
         active = state.active
         done = terminated | truncated
         episode_return = state.episode_return + reward
@@ -286,7 +304,7 @@ class SelfPlayEnv:
         flags = {name: state.episode_flags[name] | seen[name] for name in AGENT_FLAGS}
         output = AgentStepOutput(
             observation=state.observation, action=action.reshape(batch * k, -1),
-            expert_action=jnp.zeros((batch * k, action.shape[-1])), reward=_flat(reward),
+            expert_action=state.expert_action, reward=_flat(reward),
             terminated=_flat(terminated), truncated=_flat(truncated), next_observation=_flat(next_obs),
             episode_return=_flat(jnp.where(done, episode_return, 0.0)),
             episode_length=_flat(jnp.where(done, episode_length, 0)),
@@ -295,6 +313,7 @@ class SelfPlayEnv:
             active=_flat(active), scene_done=scene_done)
         running = state.replace(
             sim=sim, active=acting, gone=gone, still=still, metrics=metrics, observation=_flat(next_obs),
+            expert_action=_flat(labels),
             episode_return=jnp.where(done, 0.0, episode_return), episode_length=jnp.where(done, 0, episode_length),
             episode_flags={name: flag & ~done for name, flag in flags.items()}, key=key)
         return self._restart_finished(running, scene_done, pool), output
@@ -320,12 +339,13 @@ class SelfPlayEnv:
             return scene_parts, observation
 
         kept = ((state.sim, state.slots, state.present, state.active, state.gone, state.still, state.goal_xy,
-                 state.arcs, state.metrics), state.observation)
+                 state.arcs, state.metrics), (state.observation, state.expert_action))
         scene_parts, observation = jax.lax.cond(
             num_done > 0, lambda parts: jax.lax.fori_loop(0, num_done, restart_one, parts), lambda parts: parts, kept)
         sim, slots, present, active, gone, still, goals, arcs, metrics = scene_parts
+        observation, labels = observation
         return state.replace(sim=sim, slots=slots, present=present, active=active, gone=gone, still=still,
-                             goal_xy=goals, arcs=arcs, metrics=metrics, observation=observation,
+                             goal_xy=goals, arcs=arcs, metrics=metrics, observation=observation, expert_action=labels,
                              next_scenario=((state.next_scenario + num_done) % pool_size).astype(jnp.int32))
 
 

@@ -20,13 +20,16 @@ from vmax_sim.datatypes import SimulatorState
 from vmax_sim.env.selfplay import SelfPlayEnv
 
 AGENT_OUTCOMES = ("goal_reached", "overlap", "offroad", "red_light")
-# act(params, observation (R, ...), key) -> actions (R, A) in [-1, 1]
-ActFn = Callable[[object, object, jax.Array], jax.Array]
+# act(params, observation (R, ...), key) -> actions (R, A) in [-1, 1]; None: every agent drives by its teacher's
+# label (`SelfPlayEnv.teacher`, a rule driver on the agent's own view)
+ActFn = Callable[[object, object, jax.Array], jax.Array] | None
 
 
 def episode_outcomes(env: SelfPlayEnv, act: ActFn, params, scenes: SimulatorState, key: jax.Array) -> dict:
     """One episode of each of the B scenes -> name -> (B, K): `present` (the slot held an agent) and, per agent,
     each of AGENT_OUTCOMES during its episode and `length` (its policy steps). Jittable."""
+    if act is None and env.teacher is None:
+        raise ValueError("a self-play episode without a policy needs SelfPlayEnv(teacher=...) to drive the agents")
     batch = scenes.timestep.shape[0]
     state = env.reset(scenes, batch, key)
     present = state.present
@@ -36,7 +39,8 @@ def episode_outcomes(env: SelfPlayEnv, act: ActFn, params, scenes: SimulatorStat
     def one(carry, step_key):
         state, finished = carry  # finished (B,): the scene's episode is over (later steps are a new one)
         act_key, _ = jax.random.split(step_key)
-        state, out = env.step(state, act(params, state.observation, act_key), scenes)
+        action = state.expert_action if act is None else act(params, state.observation, act_key)
+        state, out = env.step(state, action, scenes)
         counted = jnp.repeat(~finished, k)  # (B * K,)
         record = {name: out.episode_flags[name] & counted for name in AGENT_OUTCOMES}
         record["length"] = jnp.where(counted, out.episode_length, 0)

@@ -37,11 +37,12 @@ def policy_teacher(policy: Policy) -> TeacherFn:
     return teach
 
 
-def idm_teacher(env) -> TeacherFn:
-    """IDM + pure pursuit along the SDC's route, at the lane's speed limit (the evaluation's IDM)."""
-    from vmax_sim.policies.idm import idm_policy
+def idm_teacher(env, speed_factor: float = 1.0) -> TeacherFn:
+    """IDM + pure pursuit along the SDC's route, at `speed_factor` x the lane's speed limit (1: the evaluation's
+    IDM)."""
+    from vmax_sim.policies.idm import IDMConfig, idm_policy
 
-    return policy_teacher(idm_policy(env))
+    return policy_teacher(idm_policy(env, IDMConfig(speed_factor=speed_factor)))
 
 
 def pdm_teacher(env) -> TeacherFn:

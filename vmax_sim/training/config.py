@@ -87,8 +87,12 @@ class LoopConfig:
     traffic_agents: int = 8
     # whose action labels each step for the algorithms that imitate (bc, bc_sac): "log" (the log-following
     # action), or a planner the evaluation also runs, "idm" or "pdm" (PDM-Closed), whose action is a function of
-    # the state and so can be imitated at every state the run visits; bc also drives with it (plus its noise)
+    # the state and so can be imitated at every state the run visits; bc also drives with it (plus its noise).
+    # PPO imitates it with algo.imitation_coef > 0 (self-play: the teacher runs on every agent's own view)
     teacher: str = "log"
+    # the idm teacher's desired speed = this x the lane's speed limit (self-play's goal is the agent's logged
+    # position 8 s on: logged drivers keep above the limit, and IDM at the limit reached 82% of the goals, at 1.4x 93%)
+    teacher_speed_factor: float = 1.0
     seed: int = 0
     # wall-clock budget of the training loop (minutes; setup and compilation excluded, evaluations during training
     # included): the run stops at the first chunk past it with a final checkpoint and a final evaluation
@@ -111,6 +115,10 @@ class LoopConfig:
             raise ValueError(f"train.traffic_agents must be at least 1, got {self.traffic_agents}")
         if self.teacher not in TEACHER_CHOICES:
             raise ValueError(f"train.teacher must be one of {', '.join(TEACHER_CHOICES)}, got {self.teacher!r}")
+        if not 0.5 <= self.teacher_speed_factor <= 2.0:
+            raise ValueError(f"train.teacher_speed_factor must be in [0.5, 2], got {self.teacher_speed_factor}")
+        if self.teacher_speed_factor != 1.0 and self.teacher != "idm":
+            raise ValueError(f"train.teacher_speed_factor sets the idm teacher's pace; train.teacher is {self.teacher}")
         if self.buffer_dtype not in ("float16", "bfloat16", "float32"):
             raise ValueError(f"train.buffer_dtype must be float16, bfloat16 or float32, got {self.buffer_dtype!r}")
 
@@ -138,13 +146,17 @@ class TrainConfig:
         if self.is_selfplay and self.train.traffic != "log":
             raise ValueError("train.traffic=idm drives the agents by IDM, self-play (env.controlled=controllable) by "
                              "the policy: choose one")
-        if self.train.teacher != "log" and self.algo not in ("bc", "bc_sac"):
-            raise ValueError(f"train.teacher labels the steps that bc and bc_sac imitate; {self.algo} imitates "
-                             "nothing: leave train.teacher=log")
         if not isinstance(self.env.controlled, str):
             raise ValueError("env.controlled must be sdc or controllable in training")
         if self.algo_config is None:
             object.__setattr__(self, "algo_config", get_config(self.algo, self.algo_preset))
+        imitating = self.algo in ("bc", "bc_sac") or getattr(self.algo_config, "imitation_coef", 0.0) > 0
+        if self.train.teacher != "log" and not imitating:
+            raise ValueError(f"train.teacher labels the steps that bc, bc_sac and ppo with algo.imitation_coef > 0 "
+                             f"imitate; {self.algo} imitates nothing here: leave train.teacher=log")
+        if self.is_selfplay and imitating and self.train.teacher == "log":
+            raise ValueError("self-play has no log-following labels: algo.imitation_coef > 0 needs a rule teacher "
+                             "(train.teacher=idm, pdm or pdm_state)")
         if self.env.max_num_objects != self.data.num_objects:
             object.__setattr__(self, "env", dataclasses.replace(self.env, max_num_objects=self.data.num_objects))
 
@@ -360,25 +372,35 @@ def _override_field(obj, path: list[str], text: str, full_key: str):
 
 
 def apply_overrides(config: TrainConfig, overrides: Sequence[str]) -> TrainConfig:
-    """Applies `section.field=value` strings in order (one-line ValueError on a bad key or value)."""
+    """Applies `section.field=value` strings in order (one-line ValueError on a bad key or value). The checks that
+    span sections (a teacher with an imitating algorithm...) run once, on the result, so the order is free."""
+    changes: dict[str, Any] = {}  # TrainConfig field -> its new value
+
+    def current(attribute: str):
+        if attribute == "algo_config" and changes.get("algo_config", 0) is None:  # a new algorithm or preset
+            name, preset_name = changes.get("algo", config.algo), changes.get("algo_preset", config.algo_preset)
+            if name not in ALGORITHMS:
+                raise ValueError(f"unknown algorithm {name!r}; choose among {', '.join(ALGORITHMS)}")
+            changes["algo_config"] = get_config(name, preset_name)
+        return changes.get(attribute, getattr(config, attribute))
+
     for item in overrides:
         if "=" not in item:
             raise ValueError(f"override {item!r} is not of the form section.field=value")
         key, text = item.split("=", 1)
         parts = key.strip().split(".")
         if key.strip() in ("algo", "algo_preset"):  # a fresh algorithm config from the new name / preset
-            config = dataclasses.replace(config, **{key.strip(): text.strip()}, algo_config=None)
+            changes.update({key.strip(): text.strip(), "algo_config": None})
             continue
         if len(parts) < 2 or parts[0] not in SECTIONS:
             raise ValueError(f"override {item!r}: the key must start with one of {', '.join(SECTIONS)} "
                              f"(e.g. algo.learning_rate=3e-4)")
         attribute = _SECTION_FIELD[parts[0]]
         try:
-            updated = _override_field(getattr(config, attribute), parts[1:], text, key.strip())
+            changes[attribute] = _override_field(current(attribute), parts[1:], text, key.strip())
         except (TypeError, ValueError) as error:
             raise ValueError(str(error).splitlines()[0]) from None
-        config = dataclasses.replace(config, **{attribute: updated})
-    return config
+    return dataclasses.replace(config, **changes) if changes else config
 
 
 # ----------------------------------------------------------------------------- (de)serialisation

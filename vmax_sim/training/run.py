@@ -111,12 +111,22 @@ def components(config: TrainConfig):
     reused."""
     if config.is_selfplay:
         env = SelfPlayEnv(config.env, config.obs, config.reward, selfplay=config.selfplay,
-                          action_repeat=action_repeat(config))
+                          action_repeat=action_repeat(config), teacher=teacher_of(config))
     else:
-        env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.algo in EXPERT_LABELLED,
+        imitates = config.algo in EXPERT_LABELLED or getattr(config.algo_config, "imitation_coef", 0.0) > 0
+        env = LearningEnv(config.env, config.obs, config.reward, expert_labels=imitates,
                           action_repeat=action_repeat(config), traffic=TRAFFIC_DRIVERS[config.train.traffic],
-                          traffic_agents=config.train.traffic_agents, teacher=TEACHERS[config.train.teacher])
+                          traffic_agents=config.train.traffic_agents, teacher=teacher_of(config))
     return env, build_learner(config, env)
+
+
+def teacher_of(config: TrainConfig):
+    """The run's teacher factory (`train.teacher`, the idm teacher at `train.teacher_speed_factor` x the limit);
+    None: the log."""
+    factor = config.train.teacher_speed_factor
+    if config.train.teacher == "idm" and factor != 1.0:
+        return functools.partial(idm_teacher, speed_factor=factor)
+    return TEACHERS[config.train.teacher]
 
 
 # train.traffic -> LearningEnv.traffic (None: the log)

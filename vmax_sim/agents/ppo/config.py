@@ -44,6 +44,10 @@ class PPOConfig:
     num_minibatches: int = 16
     max_grad_norm: float | None = 0.5
     reward_scale: float = 1.0
+    # weight of |mode(pi(s)) - teacher label|^2 added to the loss (rows the env labels, `Transition.expert_action`:
+    # self-play's rule teacher on each agent's own view). The agents drive themselves and the teacher labels the
+    # states they reach (DAgger); the PPO terms then work from a driver that already follows its path
+    imitation_coef: float = 0.0
     # networks (separate policy and value networks, each with its own encoder)
     policy_hidden_sizes: tuple[int, ...] = (256, 64, 32)
     value_hidden_sizes: tuple[int, ...] = (256, 64, 32)
@@ -59,6 +63,8 @@ class PPOConfig:
         check_positive(self, "learning_rate", "num_epochs", "num_minibatches", "num_envs", "unroll_length",
                        "batch_size", "clip_eps", "reward_scale")
         check_unit_interval(self, "gamma", "gae_lambda")
+        if self.imitation_coef < 0:
+            raise ValueError(f"imitation_coef must be >= 0, got {self.imitation_coef}")
         if self.entropy_estimate not in ENTROPY_ESTIMATES:
             raise ValueError(f"entropy_estimate must be one of {ENTROPY_ESTIMATES}, got {self.entropy_estimate!r}")
         if self.log_std_min >= self.log_std_max:

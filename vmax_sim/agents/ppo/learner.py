@@ -81,7 +81,8 @@ def make_learner(config: PPOConfig, encoder_factory: EncoderFactory, action_dim:
         data = ppo_losses.PPOBatch(obs=_flatten_time(rollout.obs), action=_flatten_time(rollout.action),
                                    log_prob=rollout.log_prob.reshape(-1), value=rollout.value.reshape(-1),
                                    advantage=advantages.reshape(-1), target=returns.reshape(-1),
-                                   mask=rollout.mask.reshape(-1))
+                                   mask=rollout.mask.reshape(-1),
+                                   expert_action=_flatten_time(rollout.expert_action))
 
         def epoch(carry, epoch_key):
             perm_key, loss_key = jax.random.split(epoch_key)

@@ -12,7 +12,7 @@ after the last step, and V(next_obs_t) -- the true last state -- at a truncation
     ratio   = exp(log pi(a|s) - log pi_old(a|s))
     L_clip  = -mean(min(ratio * A, clip(ratio, 1 - eps, 1 + eps) * A))
     L_V     = 1/2 mean((V - R)^2)   or, clipped, 1/2 mean(max((V - R)^2, (V_old + clip(V - V_old, -e, e) - R)^2))
-    L       = L_clip + value_coef * L_V - entropy_coef * H[pi]
+    L       = L_clip + value_coef * L_V - entropy_coef * H[pi]  (+ imitation_coef * mean |mode(pi) - a_teacher|^2)
 """
 
 from __future__ import annotations
@@ -102,6 +102,7 @@ class PPOBatch:
     advantage: jax.Array  # (N,) GAE advantage (not normalised)
     target: jax.Array  # (N,) GAE return, the value target
     mask: jax.Array  # (N,) float32, 1 for real experience, 0 for padding rows (empty or finished agent slots)
+    expert_action: jax.Array  # (N, A) the teacher's label of the state (read only with imitation_coef > 0)
 
 
 def make_loss(networks: PPONetworks, config: PPOConfig) -> Callable[..., tuple[jax.Array, Metrics]]:
@@ -121,7 +122,13 @@ def make_loss(networks: PPONetworks, config: PPOConfig) -> Callable[..., tuple[j
         else:
             entropy = masked_mean(D.sample_entropy(dist, key), mask)
         total = policy_loss + config.value_coef * v_loss - config.entropy_coef * entropy
-        metrics = {"loss": scalar(total), "policy_loss": scalar(policy_loss), "value_loss": scalar(v_loss),
+        imitation = {}
+        if config.imitation_coef > 0:
+            squared_error = jnp.sum(jnp.square(D.mode(dist) - batch.expert_action), axis=-1)
+            imitation_mse = masked_mean(squared_error, mask)
+            total = total + config.imitation_coef * imitation_mse
+            imitation = {"imitation_mse": scalar(imitation_mse)}
+        metrics = {**imitation, "loss": scalar(total), "policy_loss": scalar(policy_loss), "value_loss": scalar(v_loss),
                    "entropy": scalar(entropy), "clip_fraction": scalar(clip_fraction),
                    "approx_kl": scalar(approx_kl(log_prob, batch.log_prob, mask)),
                    "policy_std": scalar(masked_mean(jnp.mean(jnp.exp(dist.log_std), axis=-1), mask))}
