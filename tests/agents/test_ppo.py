@@ -160,6 +160,15 @@ def test_the_imitation_term_pulls_the_policy_mode_to_the_teacher_label(setup):
     second, _ = update(state, noisy, jax.random.key(3), bootstrap_value=bootstrap)
     toy.assert_trees_equal(first.params, second.params)
 
+    # the likelihood form also narrows the spread round the label (the squared error leaves it to the PPO terms)
+    nll = make_learner("ppo", dataclasses.replace(config, imitation_loss="nll", imitation_coef=1.0),
+                       lambda: toy.ToyEncoder(8), toy.ACTION_DIM)
+    narrowed = state
+    for i in range(5):
+        narrowed, nll_metrics = jax.jit(nll.update)(narrowed, taught, jax.random.key(4 + i), bootstrap_value=bootstrap)
+    assert float(nll_metrics["policy_std"]) < 0.8 * float(metrics["policy_std"])
+    assert distance(narrowed) < 0.5 * distance(state)
+
 
 def test_update_deterministic_and_no_retrace(setup):
     learner, state, rollout = setup

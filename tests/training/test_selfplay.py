@@ -113,14 +113,15 @@ def test_a_teacher_labels_every_agent_and_drives_them_round_the_parked_car(parke
 
 
 def test_ppo_imitates_a_teacher_only_when_asked_and_in_any_order():
-    config = preset_config("ppo-selfplay")
-    taught = apply_overrides(config, ["train.teacher=idm", "train.teacher_speed_factor=1.4",
-                                      "algo.imitation_coef=1.0"])  # the teacher named before the coefficient
+    untaught = apply_overrides(preset_config("ppo-selfplay"), ["algo.imitation_coef=0", "train.teacher=log",
+                                                               "train.teacher_speed_factor=1"])
+    taught = apply_overrides(untaught, ["train.teacher=idm", "train.teacher_speed_factor=1.4",
+                                        "algo.imitation_coef=1.0"])  # the teacher named before the coefficient
     assert taught.train.teacher == "idm" and taught.algo_config.imitation_coef == 1.0
     with pytest.raises(ValueError, match="imitation_coef"):
-        apply_overrides(config, ["train.teacher=idm"])  # PPO would not read the labels
+        apply_overrides(untaught, ["train.teacher=idm"])  # PPO would not read the labels
     with pytest.raises(ValueError, match="rule teacher"):
-        apply_overrides(config, ["algo.imitation_coef=1.0"])  # self-play has no log labels
+        apply_overrides(untaught, ["algo.imitation_coef=1.0"])  # self-play has no log labels
     with pytest.raises(ValueError, match="teacher_speed_factor"):
         apply_overrides(taught, ["train.teacher=pdm"])  # the pace is the idm teacher's
 
@@ -130,6 +131,7 @@ def test_the_selfplay_preset_is_ppo_over_every_controllable_agent():
     assert config.algo == "ppo" and config.env.controlled == "controllable" and config.is_selfplay
     assert config.agents_per_env == config.selfplay.max_agents == 8
     assert config.reward.preset == "safety" and config.selfplay.approach_reward > 0  # the goal, not binary progress
+    assert config.train.teacher == "idm" and config.algo_config.imitation_coef > 0  # taught by IDM on every agent
     assert preset_config("ppo-selfplay-navigation").reward.preset == "navigation"
     assert preset_config("ppo").reward.preset == "navigation" and not preset_config("ppo").is_selfplay
     changed = apply_overrides(config, ["selfplay.max_agents=4", "selfplay.crashed=obstacle"])

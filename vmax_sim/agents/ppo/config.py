@@ -24,6 +24,7 @@ from typing import Any
 from vmax_sim.agents.common import check_positive, check_unit_interval, preset
 
 ENTROPY_ESTIMATES = ("gaussian", "sample")
+IMITATION_LOSSES = ("mse", "nll")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,6 +49,9 @@ class PPOConfig:
     # self-play's rule teacher on each agent's own view). The agents drive themselves and the teacher labels the
     # states they reach (DAgger); the PPO terms then work from a driver that already follows its path
     imitation_coef: float = 0.0
+    # "mse": |mode - label|^2 (pulls the mode only: the spread is left to the PPO terms, and grew from 0.5 to 0.8-1.3
+    # over self-play's 30 minutes); "nll": -log pi(label | s), which also narrows the spread round the label
+    imitation_loss: str = "mse"
     # networks (separate policy and value networks, each with its own encoder)
     policy_hidden_sizes: tuple[int, ...] = (256, 64, 32)
     value_hidden_sizes: tuple[int, ...] = (256, 64, 32)
@@ -65,6 +69,8 @@ class PPOConfig:
         check_unit_interval(self, "gamma", "gae_lambda")
         if self.imitation_coef < 0:
             raise ValueError(f"imitation_coef must be >= 0, got {self.imitation_coef}")
+        if self.imitation_loss not in IMITATION_LOSSES:
+            raise ValueError(f"imitation_loss must be one of {IMITATION_LOSSES}, got {self.imitation_loss!r}")
         if self.entropy_estimate not in ENTROPY_ESTIMATES:
             raise ValueError(f"entropy_estimate must be one of {ENTROPY_ESTIMATES}, got {self.entropy_estimate!r}")
         if self.log_std_min >= self.log_std_max:

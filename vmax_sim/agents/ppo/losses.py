@@ -12,7 +12,8 @@ after the last step, and V(next_obs_t) -- the true last state -- at a truncation
     ratio   = exp(log pi(a|s) - log pi_old(a|s))
     L_clip  = -mean(min(ratio * A, clip(ratio, 1 - eps, 1 + eps) * A))
     L_V     = 1/2 mean((V - R)^2)   or, clipped, 1/2 mean(max((V - R)^2, (V_old + clip(V - V_old, -e, e) - R)^2))
-    L       = L_clip + value_coef * L_V - entropy_coef * H[pi]  (+ imitation_coef * mean |mode(pi) - a_teacher|^2)
+    L       = L_clip + value_coef * L_V - entropy_coef * H[pi]
+              (+ imitation_coef * mean |mode(pi) - a_teacher|^2, or * mean -log pi(a_teacher | s))
 """
 
 from __future__ import annotations
@@ -126,8 +127,10 @@ def make_loss(networks: PPONetworks, config: PPOConfig) -> Callable[..., tuple[j
         if config.imitation_coef > 0:
             squared_error = jnp.sum(jnp.square(D.mode(dist) - batch.expert_action), axis=-1)
             imitation_mse = masked_mean(squared_error, mask)
-            total = total + config.imitation_coef * imitation_mse
-            imitation = {"imitation_mse": scalar(imitation_mse)}
+            imitation_nll = -masked_mean(D.log_prob(dist, batch.expert_action), mask)
+            term = imitation_nll if config.imitation_loss == "nll" else imitation_mse
+            total = total + config.imitation_coef * term
+            imitation = {"imitation_mse": scalar(imitation_mse), "imitation_nll": scalar(imitation_nll)}
         metrics = {**imitation, "loss": scalar(total), "policy_loss": scalar(policy_loss), "value_loss": scalar(v_loss),
                    "entropy": scalar(entropy), "clip_fraction": scalar(clip_fraction),
                    "approx_kl": scalar(approx_kl(log_prob, batch.log_prob, mask)),
