@@ -102,6 +102,7 @@ def test_a_repeated_action_is_held_for_k_steps_and_stops_at_the_episode_end():
     assert float(crash.reward[hit[0], 1]) <= -1.0 + 4 * 0.2 + 1e-6
 
 
+@pytest.mark.slow  # ~14 s (a compilation of its own); the default suite ran 9:40 of its 10 minutes
 def test_finished_episodes_restart_on_the_next_pool_scenarios():
     out, second_object_ids = run(ENV.expert_action, 81, batch_size=2)
     # episodes 0, 1 run scenarios 0, 1 of the pool; after 80 steps both restart on scenarios 2 then 0
