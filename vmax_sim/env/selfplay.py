@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from vmax_sim.datatypes import Action, SimulatorState, update_timestep
+from vmax_sim.datatypes import Action, RoadgraphPoints, SimulatorState, update_timestep
 from vmax_sim.env.agent_view import agent_view, choose_agents, stop_sign_points, with_sdc_route
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.environment import Environment
@@ -70,6 +70,7 @@ class SelfPlayState:
     goal_xy: jax.Array  # (B, K, 2) float32, each agent's last logged position in the episode
     arcs: jax.Array  # (B, K, 1, 2) float32, logged start / end arcs along each agent's own path
     metrics: dict  # name -> (B, K) float32, each agent's step metrics now
+    signs: RoadgraphPoints  # (B, S) the stop-sign points handed to the teacher's views (found once per scene)
     observation: Observation  # (B * K, ...) the policy's input now (flat, scene-major)
     expert_action: jax.Array  # (B * K, A) float32, the teacher's label of each agent now (zeros without a teacher)
     episode_return: jax.Array  # (B, K) float32
@@ -146,12 +147,11 @@ class SelfPlayEnv:
         noise_key = key if key is not None and _has_noise(self.obs_config) else None
         return sdc_observation(agent_view(sim, slot), shared, self.obs_config, noise_key)
 
-    def _labels(self, sim: SimulatorState, slots: jax.Array, acting: jax.Array) -> jax.Array:
-        """Each acting agent's teacher action on its own view (the stop signs handed over once, not the whole
+    def _labels(self, sim: SimulatorState, slots: jax.Array, acting: jax.Array, signs: RoadgraphPoints) -> jax.Array:
+        """Each acting agent's teacher action on its own view (the scene's stop signs handed over, not the whole
         roadgraph K times). (K, A) float32; zeros in the other rows and without a teacher."""
         if self._teacher_fn is None:
             return jnp.zeros((slots.shape[0], self.action_dim), jnp.float32)
-        signs = stop_sign_points(sim)
         labels = jax.vmap(lambda slot: self._teacher_fn(agent_view(sim, slot, signs)))(slots)
         return jnp.where(acting[:, None], labels, 0.0)
 
@@ -190,8 +190,9 @@ class SelfPlayEnv:
         sim = sim.replace(object_metadata=sim.object_metadata.replace(is_controlled=is_agent, max_controlled=k))
         observation = jax.vmap(lambda slot, q: self._observe(sim, slot, q, None))(slots, shared)
         none = jnp.zeros(sim.num_objects, bool)
-        labels = self._labels(sim, slots, present)
-        return sim, slots, present, present, none, none, goals, arcs, metrics, (observation, labels)
+        signs = stop_sign_points(sim)  # as LearningEnv's traffic: once per scene, not at every step
+        labels = self._labels(sim, slots, present, signs)
+        return sim, slots, present, present, none, none, goals, arcs, metrics, signs, (observation, labels)
 
     def _move(self, sim: SimulatorState, slots: jax.Array, acting: jax.Array, action: jax.Array,
               gone: jax.Array, still: jax.Array) -> SimulatorState:
@@ -241,7 +242,7 @@ class SelfPlayEnv:
         now = sim.current_sim_trajectory
         return jnp.hypot(now.x[slots, 0] - goals[:, 0], now.y[slots, 0] - goals[:, 1])
 
-    def _advance(self, sim, slots, active, gone, still, goals, arcs, metrics, action, key):
+    def _advance(self, sim, slots, active, gone, still, goals, arcs, metrics, signs, action, key):
         """One policy step of one scene: actions (K, A) held for `action_repeat` simulator steps, or until the
         scene's time limit. The observation reuses the last step's queries."""
         zeros = jnp.zeros_like(active)
@@ -266,7 +267,7 @@ class SelfPlayEnv:
         observation = jax.vmap(lambda slot, q, k: self._observe(sim, slot, q, k))(slots, shared, keys)
         scene_done = truncated_scene | ~jnp.any(acting)
         return (sim, acting, gone, still, metrics, reward, terminated, truncated, flags,
-                (observation, self._labels(sim, slots, acting)), scene_done)
+                (observation, self._labels(sim, slots, acting, signs)), scene_done)
 
     def _time_is_up(self, sim: SimulatorState) -> jax.Array:
         """The scene reached its time limit or the end of its log. () bool"""
@@ -279,11 +280,11 @@ class SelfPlayEnv:
         pool_size = pool.timestep.shape[0]
         scenes = jax.tree.map(lambda a: a[jnp.arange(batch_size) % pool_size], pool)
         parts = jax.vmap(self._start)(scenes, jax.random.split(key, batch_size))
-        sim, slots, present, active, gone, still, goals, arcs, metrics, (observation, labels) = parts
+        sim, slots, present, active, gone, still, goals, arcs, metrics, signs, (observation, labels) = parts
         shape = slots.shape
         return SelfPlayState(
             sim=sim, slots=slots, present=present, active=active, gone=gone, still=still, goal_xy=goals,
-            arcs=arcs, metrics=metrics, observation=_flat(observation), expert_action=_flat(labels),
+            arcs=arcs, metrics=metrics, signs=signs, observation=_flat(observation), expert_action=_flat(labels),
             episode_return=jnp.zeros(shape),
             episode_length=jnp.zeros(shape, jnp.int32), episode_flags={n: jnp.zeros(shape, bool) for n in AGENT_FLAGS},
             next_scenario=jnp.asarray(batch_size % pool_size, jnp.int32), key=key)
@@ -295,7 +296,8 @@ class SelfPlayEnv:
         action = jnp.clip(action, -1.0, 1.0).reshape(batch, k, -1)
         key, step_key = jax.random.split(state.key)
         outs = jax.vmap(self._advance)(state.sim, state.slots, state.active, state.gone, state.still, state.goal_xy,
-                                       state.arcs, state.metrics, action, jax.random.split(step_key, batch))
+                                       state.arcs, state.metrics, state.signs, action,
+                                       jax.random.split(step_key, batch))
         sim, acting, gone, still, metrics, reward, terminated, truncated, seen, (next_obs, labels), scene_done = outs
         active = state.active
         done = terminated | truncated
@@ -339,13 +341,14 @@ class SelfPlayEnv:
             return scene_parts, observation
 
         kept = ((state.sim, state.slots, state.present, state.active, state.gone, state.still, state.goal_xy,
-                 state.arcs, state.metrics), (state.observation, state.expert_action))
+                 state.arcs, state.metrics, state.signs), (state.observation, state.expert_action))
         scene_parts, observation = jax.lax.cond(
             num_done > 0, lambda parts: jax.lax.fori_loop(0, num_done, restart_one, parts), lambda parts: parts, kept)
-        sim, slots, present, active, gone, still, goals, arcs, metrics = scene_parts
+        sim, slots, present, active, gone, still, goals, arcs, metrics, signs = scene_parts
         observation, labels = observation
         return state.replace(sim=sim, slots=slots, present=present, active=active, gone=gone, still=still,
-                             goal_xy=goals, arcs=arcs, metrics=metrics, observation=observation, expert_action=labels,
+                             goal_xy=goals, arcs=arcs, metrics=metrics, signs=signs, observation=observation,
+                             expert_action=labels,
                              next_scenario=((state.next_scenario + num_done) % pool_size).astype(jnp.int32))
 
 

@@ -148,18 +148,22 @@ class TrainConfig:
             raise ValueError("env.controlled must be sdc or controllable in training")
         if self.algo_config is None:
             object.__setattr__(self, "algo_config", get_config(self.algo, self.algo_preset))
-        imitating = self.algo in ("bc", "bc_sac") or getattr(self.algo_config, "imitation_coef", 0.0) > 0
-        if self.train.teacher != "log" and not imitating:
+        if self.train.teacher != "log" and not self.imitates:
             raise ValueError(f"train.teacher labels the steps that bc, bc_sac and ppo with algo.imitation_coef > 0 "
                              f"imitate; {self.algo} imitates nothing here: leave train.teacher=log")
         if self.train.teacher_speed_factor != 1.0 and self.train.teacher != "idm":  # here: overrides in any order
             raise ValueError(f"train.teacher_speed_factor sets the idm teacher's pace; train.teacher is "
                              f"{self.train.teacher}")
-        if self.is_selfplay and imitating and self.train.teacher == "log":
+        if self.is_selfplay and self.imitates and self.train.teacher == "log":
             raise ValueError("self-play has no log-following labels: algo.imitation_coef > 0 needs a rule teacher "
                              "(train.teacher=idm, pdm or pdm_state)")
         if self.env.max_num_objects != self.data.num_objects:
             object.__setattr__(self, "env", dataclasses.replace(self.env, max_num_objects=self.data.num_objects))
+
+    @property
+    def imitates(self) -> bool:
+        """The learner reads a label per step (`Transition.expert_action`): bc, bc_sac, ppo with imitation_coef > 0."""
+        return self.algo in ("bc", "bc_sac") or getattr(self.algo_config, "imitation_coef", 0.0) > 0
 
     @property
     def is_selfplay(self) -> bool:

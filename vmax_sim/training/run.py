@@ -59,7 +59,6 @@ from vmax_sim.training.ensemble import EnsembleCheckpoints, ensemble_learner, is
 from vmax_sim.training.interrupt import StopRequests
 from vmax_sim.training.logger import RunLogger
 from vmax_sim.training.loop import (
-    EXPERT_LABELLED,
     OFF_POLICY,
     TrainCarry,
     env_steps_per_chunk,
@@ -113,8 +112,7 @@ def components(config: TrainConfig):
         env = SelfPlayEnv(config.env, config.obs, config.reward, selfplay=config.selfplay,
                           action_repeat=action_repeat(config), teacher=teacher_of(config))
     else:
-        imitates = config.algo in EXPERT_LABELLED or getattr(config.algo_config, "imitation_coef", 0.0) > 0
-        env = LearningEnv(config.env, config.obs, config.reward, expert_labels=imitates,
+        env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.imitates,
                           action_repeat=action_repeat(config), traffic=TRAFFIC_DRIVERS[config.train.traffic],
                           traffic_agents=config.train.traffic_agents, teacher=teacher_of(config))
     return env, build_learner(config, env)

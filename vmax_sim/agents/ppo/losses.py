@@ -127,10 +127,12 @@ def make_loss(networks: PPONetworks, config: PPOConfig) -> Callable[..., tuple[j
         if config.imitation_coef > 0:
             squared_error = jnp.sum(jnp.square(D.mode(dist) - batch.expert_action), axis=-1)
             imitation_mse = masked_mean(squared_error, mask)
-            imitation_nll = -masked_mean(D.log_prob(dist, batch.expert_action), mask)
-            term = imitation_nll if config.imitation_loss == "nll" else imitation_mse
+            imitation = {"imitation_mse": scalar(imitation_mse)}
+            term = imitation_mse
+            if config.imitation_loss == "nll":
+                term = -masked_mean(D.log_prob(dist, batch.expert_action), mask)
+                imitation["imitation_nll"] = scalar(term)
             total = total + config.imitation_coef * term
-            imitation = {"imitation_mse": scalar(imitation_mse), "imitation_nll": scalar(imitation_nll)}
         metrics = {**imitation, "loss": scalar(total), "policy_loss": scalar(policy_loss), "value_loss": scalar(v_loss),
                    "entropy": scalar(entropy), "clip_fraction": scalar(clip_fraction),
                    "approx_kl": scalar(approx_kl(log_prob, batch.log_prob, mask)),
