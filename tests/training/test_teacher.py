@@ -69,6 +69,14 @@ def test_teacher_choices_are_checked():
         apply_overrides(preset_config("bc-mlp"), ["algo.student_drive=1.5"])
 
 
+def test_a_preset_teacher_goes_with_the_algorithm_config_that_used_it():
+    debug = apply_overrides(preset_config("ppo-selfplay"), ["algo_preset=debug"])  # a debug ppo imitates nothing
+    assert (debug.train.teacher, debug.train.teacher_speed_factor, debug.imitates) == ("log", 1.0, False)
+    assert apply_overrides(preset_config("bc-dagger"), ["algo_preset=debug"]).train.teacher == "pdm_state"  # bc does
+    with pytest.raises(ValueError, match="ppo imitates nothing"):  # a teacher the user names is checked, not dropped
+        apply_overrides(preset_config("ppo-selfplay"), ["algo_preset=debug", "train.teacher=idm"])
+
+
 def test_slim_training_states_keep_the_stop_signs():
     from scenariomax.schema import RG_STOP_SIGN
     from vmax_sim.env.agent_view import MAX_STOP_SIGN_POINTS

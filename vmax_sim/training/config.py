@@ -163,7 +163,7 @@ class TrainConfig:
     @property
     def imitates(self) -> bool:
         """The learner reads a label per step (`Transition.expert_action`): bc, bc_sac, ppo with imitation_coef > 0."""
-        return self.algo in ("bc", "bc_sac") or getattr(self.algo_config, "imitation_coef", 0.0) > 0
+        return imitates(self.algo, self.algo_config)
 
     @property
     def is_selfplay(self) -> bool:
@@ -214,6 +214,11 @@ DEFAULT_PRESET = "bc-dagger"
 SECTIONS = ("algo", "network", "env", "obs", "reward", "data", "train", "selfplay")
 _SECTION_FIELD = {"algo": "algo_config", "network": "network", "env": "env", "obs": "obs", "reward": "reward",
                   "data": "data", "train": "train", "selfplay": "selfplay"}
+
+
+def imitates(algo: str, algo_config: Any) -> bool:
+    """Whether `algo` with `algo_config` reads a teacher's label per step: bc, bc_sac, ppo with imitation_coef > 0."""
+    return algo in ("bc", "bc_sac") or getattr(algo_config, "imitation_coef", 0.0) > 0
 
 
 def preset_config(name: str = DEFAULT_PRESET) -> TrainConfig:
@@ -411,7 +416,21 @@ def apply_overrides(config: TrainConfig, overrides: Sequence[str]) -> TrainConfi
             changes[attribute] = _override_field(current(attribute), parts[1:], text, key.strip())
         except (TypeError, ValueError) as error:
             raise ValueError(str(error).splitlines()[0]) from None
-    return dataclasses.replace(config, **changes) if changes else config
+    return dataclasses.replace(config, **_drop_unused_teacher(config, changes, overrides)) if changes else config
+
+
+def _drop_unused_teacher(config: TrainConfig, changes: dict[str, Any], overrides: Sequence[str]) -> dict[str, Any]:
+    """A preset's teacher belongs to its algorithm config: `--preset ppo-selfplay algo_preset=debug` swaps in an
+    algorithm that imitates nothing, so the preset's idm teacher goes too. A teacher the overrides name stays (and
+    meets TrainConfig's check)."""
+    if "algo_config" not in changes or any(item.split("=", 1)[0].strip().startswith("train.teacher")
+                                           for item in overrides):
+        return changes
+    algo, algo_config = changes.get("algo", config.algo), changes.get("algo_config", config.algo_config)
+    if imitates(algo, algo_config):
+        return changes
+    train = changes.get("train", config.train)
+    return {**changes, "train": dataclasses.replace(train, teacher="log", teacher_speed_factor=1.0)}
 
 
 # ----------------------------------------------------------------------------- (de)serialisation
