@@ -1,4 +1,5 @@
-"""train.keep_best: RUN/best holds the checkpoint of the best held-out V-Max score, evaluable as a run."""
+"""train.keep_best: RUN/best holds the checkpoint of the best held-out score (V-Max; self-play: clean goal-reaching),
+evaluable as a run."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import pytest
 
 from tests.training.conftest import tiny_config
 from vmax_sim.training import train
-from vmax_sim.training.best import BestCheckpoint
+from vmax_sim.training.best import SELFPLAY_SCORE, BestCheckpoint
 from vmax_sim.training.run_policy import evaluate_run
 
 
@@ -36,3 +37,14 @@ def test_the_best_evaluated_checkpoint_is_kept_and_evaluates_to_its_recorded_sco
     kept = BestCheckpoint(run)
     assert kept.score == pytest.approx(best_score)
     assert not kept.offer(999, {"vmax_score": best_score, "accuracy": 0.0, "accuracy_at_fault": 0.0}, None, {})
+
+
+def test_a_selfplay_run_keeps_its_best_goal_reaching_not_the_sdc_score(tmp_path):
+    best = tmp_path / "run" / "best"
+    best.mkdir(parents=True)
+    (best / "best.json").write_text(json.dumps({"env_steps": 50, "vmax_score": 0.7, SELFPLAY_SCORE: 0.8}))
+    kept = BestCheckpoint(tmp_path / "run", SELFPLAY_SCORE)
+    assert kept.score == pytest.approx(0.8) and kept.score_name == "clean goal-reaching"
+    # a better SDC among log replay with fewer agents at their goals is not self-play's better checkpoint
+    assert not kept.offer(90, {"vmax_score": 0.95, SELFPLAY_SCORE: 0.74, "accuracy": 1.0, "accuracy_at_fault": 1.0},
+                          None, {})

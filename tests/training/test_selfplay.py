@@ -177,7 +177,10 @@ def test_selfplay_run_logs_agent_steps_and_goals_then_drives_every_agent(synthet
     first = rows[0]  # the first chunk: its env steps are the scene steps it ran
     assert float(first["agent_steps"]) > float(first["env_steps"])  # several agents act in a scene
     with open(run / "eval.csv") as f:
-        assert "selfplay/goal_reached" in next(csv.DictReader(f))
+        evaluation = next(csv.DictReader(f))
+    assert "selfplay/goal_reached" in evaluation
+    best = json.loads((run / "best" / "best.json").read_text())  # ranked by the agents' goals, not the SDC's score
+    assert best["selfplay/goal_reached_clean"] == pytest.approx(float(evaluation["selfplay/goal_reached_clean"]))
 
     cli = [str(Path(sys.executable).parent / "vmax-sim")]
     shown = subprocess.run([*cli, "evaluate", "--mode", "selfplay", "--policy", str(run), "--num-scenarios", "4",

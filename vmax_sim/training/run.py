@@ -44,7 +44,7 @@ from vmax_sim.networks import make_encoder
 from vmax_sim.policies.teacher import idm_teacher, pdm_state_teacher, pdm_teacher
 from vmax_sim.policies.traffic import idm_traffic
 from vmax_sim.training import distributed
-from vmax_sim.training.best import BestCheckpoint
+from vmax_sim.training.best import SDC_SCORE, SELFPLAY_SCORE, BestCheckpoint
 from vmax_sim.training.checkpoint import CheckpointStore
 from vmax_sim.training.config import (
     TrainConfig,
@@ -586,7 +586,7 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
         print_fn(f"train.total_env_steps={loop.total_env_steps:,} runs as {target:,} env steps (whole chunks of "
                  f"{per_chunk:,})")
     bar = _Progress(target, env_steps, progress)
-    best = BestCheckpoint(run_dir) if loop.keep_best else None
+    best = BestCheckpoint(run_dir, SELFPLAY_SCORE if config.is_selfplay else SDC_SCORE) if loop.keep_best else None
     ensemble = EnsembleCheckpoints(run_dir, loop.ensemble) if loop.ensemble else None
 
     def save_checkpoint(env_steps: int, carry, host: dict) -> None:  # the run's checkpoint, and an ensemble member
@@ -678,7 +678,7 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
         final = evaluator.run(distributed.local_copy(learner.policy_params(carry.learner)), env_steps, wall_s)
         if best is not None:
             best.offer(env_steps, final, carry, host_record(wall_s))
-            print_fn(f"best held-out V-Max score {best.score:.3f}: its checkpoint is in {best.directory} "
+            print_fn(f"best held-out {best.score_name} {best.score:.3f}: its checkpoint is in {best.directory} "
                      f"(vmax-sim evaluate --policy {best.directory})")
         if ensemble is not None and is_ensemble(ensemble.directory):
             params, members = member_params(ensemble.store, carry.learner, learner.policy_params)
@@ -760,7 +760,9 @@ class _Evaluator:
                 f"V-Max score {summary['vmax_score']:.3f}  ({summary['num_episodes']} held-out episodes)")
         if self.config.is_selfplay:
             selfplay = self._selfplay(params)
-            row.update({f"selfplay/{name}": selfplay[name] for name in SELFPLAY_COLUMNS})
+            rates = {f"selfplay/{name}": selfplay[name] for name in SELFPLAY_COLUMNS}
+            row.update(rates)
+            summary = {**summary, **rates}  # the best checkpoint of a self-play run is ranked by its goal-reaching
             line += (f"; every agent: goal {selfplay['goal_reached']:.3f}  collision {selfplay['collision']:.3f}  "
                      f"off-road {selfplay['offroad']:.3f}  ({selfplay['num_agents']} agents)")
         self.log.log(env_steps, row)
