@@ -61,7 +61,7 @@ def test_bc_learns_the_toy_expert():
 
 
 def test_bc_moving_average_is_the_policy_that_acts():
-    from vmax_sim.agents.bc.learner import ema_weight
+    from vmax_sim.agents.common import ema_weight
     config = get_config("bc", "debug", learning_rate=1e-3, ema_decay=0.99)
     learner = make_learner("bc", config, lambda: toy.ToyEncoder(32), toy.ACTION_DIM)
     state = learner.init(jax.random.key(0), toy.observe(toy.reset(jax.random.key(0), 2)))

@@ -184,6 +184,32 @@ def test_update_deterministic_and_no_retrace(setup):
     assert {"policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction"} <= set(metrics)
 
 
+def test_the_moving_average_is_evaluated_while_the_raw_parameters_collect(setup):
+    """With ema_decay > 0 the run's policy (evaluated, saved) is the parameters' moving average; the rollouts still
+    come from the raw parameters, whose log-probabilities the PPO ratio needs."""
+    import dataclasses
+
+    from vmax_sim.agents.common import ema_weight
+
+    _, _, rollout = setup
+    config = dataclasses.replace(CONFIG, ema_decay=0.9)
+    learner = make_learner("ppo", config, lambda: toy.ToyEncoder(8), toy.ACTION_DIM)
+    state = learner.init(jax.random.key(0), toy.observe(toy.reset(jax.random.key(0), 4)))
+    update = jax.jit(learner.update)
+    after, _ = update(state, rollout, jax.random.key(3))
+    toy.assert_trees_equal(learner.behaviour_params(after), after.params)
+    weight = float(ema_weight(jnp.int32(0), 0.9))  # the first update moves the average most of the way
+    expected = jax.tree.map(lambda new, old: weight * new + (1 - weight) * old, after.params, state.params)
+    chex.assert_trees_all_close(learner.policy_params(after), expected, rtol=1e-5, atol=1e-7)
+    for i in range(5):
+        after, _ = update(after, rollout, jax.random.key(10 + i))
+    raw, average = learner.behaviour_params(after), learner.policy_params(after)
+    assert not np.allclose(raw.policy["params"]["loc_head"]["kernel"], average.policy["params"]["loc_head"]["kernel"])
+    plain = make_learner("ppo", CONFIG, lambda: toy.ToyEncoder(8), toy.ACTION_DIM)  # ema_decay 0: one set
+    plain_state = plain.init(jax.random.key(0), toy.observe(toy.reset(jax.random.key(0), 4)))
+    assert plain.policy_params(plain_state) is plain_state.params and plain_state.ema_params is None
+
+
 def test_update_rejects_a_rollout_that_does_not_split_into_minibatches(setup):
     learner, state, rollout = setup
     odd = jax.tree.map(lambda x: x[:11, :3], rollout)  # 33 transitions for 4 minibatches

@@ -28,6 +28,14 @@ def polyak_update(params: Params, target_params: Params, tau: float) -> Params:
     return optax.incremental_update(params, target_params, tau)
 
 
+def ema_weight(step: jax.Array, decay: float) -> jax.Array:
+    """The share of the new parameters in the average after update `step` (0-based): 1 - decay, but larger for
+    the first updates (1 - (1 + step) / (10 + step) while that is larger) so the average soon leaves the random
+    initialisation instead of carrying it for 1 / (1 - decay) updates."""
+    warm = 1.0 - (1.0 + step) / (10.0 + step)
+    return jnp.maximum(1.0 - decay, warm.astype(jnp.float32))
+
+
 def apply_gradients(optimizer: optax.GradientTransformation, grads: Params, opt_state, params: Params):
     """One optimiser step: (params, opt_state) after applying `grads`."""
     updates, opt_state = optimizer.update(grads, opt_state, params)

@@ -77,6 +77,8 @@ class Learner(NamedTuple):
     act_with_info(params, obs, key, deterministic=False) -> (action (B, A), info)
         info: {"log_prob": (B,)} (log-probability of the returned action) and, for ppo, "value": (B,).
     value(params, obs) -> (B,) state value; None for learners without a value function.
+    behaviour_params(state) -> params that collect on-policy rollouts (ppo: the raw parameters when policy_params
+        is their moving average); None: policy_params.
     """
 
     init: Callable[..., Any]
@@ -85,3 +87,4 @@ class Learner(NamedTuple):
     policy_params: Callable[[Any], Params]
     act_with_info: Callable[..., tuple[jax.Array, Metrics]]
     value: Callable[..., jax.Array] | None = None
+    behaviour_params: Callable[[Any], Params] | None = None

@@ -189,7 +189,7 @@ def make_on_policy_chunk(env: LearningEnv | SelfPlayEnv, learner: Learner, algo_
 
     def iteration(carry: TrainCarry, pool: SimulatorState):
         key, rollout_key, update_key = jax.random.split(carry.key, 3)
-        params = learner.policy_params(carry.learner)
+        params = (learner.behaviour_params or learner.policy_params)(carry.learner)  # on-policy: the raw params
         (_, env_state, _), (rollouts, bootstrap, stats) = jax.lax.scan(
             lambda c, _: one_unroll(c, pool), (params, carry.env, rollout_key), None, length=num_unrolls)
         # (U, T, E, ...) -> (T, U * E, ...): every (unroll, env row) pair is one sequence

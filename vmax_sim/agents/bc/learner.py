@@ -14,7 +14,7 @@ import optax
 from vmax_sim.agents.bc.config import BCConfig
 from vmax_sim.agents.bc.losses import bc_loss
 from vmax_sim.agents.bc.networks import make_networks
-from vmax_sim.agents.common import apply_gradients, global_norm, make_optimizer, polyak_update, scalar
+from vmax_sim.agents.common import apply_gradients, ema_weight, global_norm, make_optimizer, polyak_update, scalar
 from vmax_sim.agents.networks import EncoderFactory
 from vmax_sim.agents.policy import make_act_fns
 from vmax_sim.agents.types import Learner, Metrics, Params, Transition
@@ -26,14 +26,6 @@ class BCTrainState:
     opt_state: optax.OptState
     step: jax.Array  # () int32, updates done
     ema_params: Params | None = None  # moving average of policy_params (None when config.ema_decay == 0)
-
-
-def ema_weight(step: jax.Array, decay: float) -> jax.Array:
-    """The share of the new parameters in the average after update `step` (0-based): 1 - decay, but larger for
-    the first updates (1 - (1 + step) / (10 + step) while that is larger) so the average soon leaves the random
-    initialisation instead of carrying it for 1 / (1 - decay) updates."""
-    warm = 1.0 - (1.0 + step) / (10.0 + step)
-    return jnp.maximum(1.0 - decay, warm.astype(jnp.float32))
 
 
 def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: int) -> Learner:

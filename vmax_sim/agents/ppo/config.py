@@ -52,6 +52,11 @@ class PPOConfig:
     # "mse": |mode - label|^2 (pulls the mode only: the spread is left to the PPO terms, and grew from 0.5 to 0.8-1.3
     # over self-play's 30 minutes); "nll": -log pi(label | s), which also narrows the spread round the label
     imitation_loss: str = "mse"
+    # decay of an exponential moving average of the parameters, updated after every update (rollout); when > 0 the
+    # average is the policy that is evaluated and saved, while the raw parameters still collect the rollouts (the
+    # PPO ratio needs the behaviour policy). Self-play's goal-reaching swung by 15-30 points between checkpoints
+    # 20k env steps apart (docs/selfplay.md)
+    ema_decay: float = 0.0
     # networks (separate policy and value networks, each with its own encoder)
     policy_hidden_sizes: tuple[int, ...] = (256, 64, 32)
     value_hidden_sizes: tuple[int, ...] = (256, 64, 32)
@@ -69,6 +74,8 @@ class PPOConfig:
         check_unit_interval(self, "gamma", "gae_lambda")
         if self.imitation_coef < 0:
             raise ValueError(f"imitation_coef must be >= 0, got {self.imitation_coef}")
+        if not 0.0 <= self.ema_decay < 1.0:
+            raise ValueError(f"ema_decay must be in [0, 1), got {self.ema_decay}")
         if self.imitation_loss not in IMITATION_LOSSES:
             raise ValueError(f"imitation_loss must be one of {IMITATION_LOSSES}, got {self.imitation_loss!r}")
         if self.entropy_estimate not in ENTROPY_ESTIMATES:

@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from vmax_sim.agents.common import apply_gradients, global_norm, make_optimizer, scalar
+from vmax_sim.agents.common import apply_gradients, ema_weight, global_norm, make_optimizer, polyak_update, scalar
 from vmax_sim.agents.networks import EncoderFactory
 from vmax_sim.agents.policy import make_act_fns
 from vmax_sim.agents.ppo import losses as ppo_losses
@@ -27,6 +27,7 @@ class PPOTrainState:
     params: PPOParams
     opt_state: optax.OptState
     step: jax.Array  # () int32, updates (rollouts) done
+    ema_params: PPOParams | None = None  # moving average of params (None when config.ema_decay == 0)
 
 
 def _flatten_time(tree):
@@ -43,7 +44,8 @@ def make_learner(config: PPOConfig, encoder_factory: EncoderFactory, action_dim:
         policy_key, value_key = jax.random.split(key)
         params = PPOParams(policy=networks.policy.init(policy_key, obs_example),
                            value=networks.value.init(value_key, obs_example))
-        return PPOTrainState(params=params, opt_state=optimizer.init(params), step=jnp.zeros((), jnp.int32))
+        return PPOTrainState(params=params, opt_state=optimizer.init(params), step=jnp.zeros((), jnp.int32),
+                             ema_params=params if config.ema_decay > 0 else None)
 
     def value(params: PPOParams, obs) -> jax.Array:
         return networks.value.apply(params.value, obs)
@@ -103,7 +105,10 @@ def make_learner(config: PPOConfig, encoder_factory: EncoderFactory, action_dim:
         metrics.update(advantage_mean=scalar(ppo_losses.masked_mean(advantages, mask)),
                        return_mean=scalar(return_mean),
                        explained_variance=scalar(1.0 - residual_var / (return_var + 1e-8)))
-        return PPOTrainState(params=params, opt_state=opt_state, step=state.step + 1), metrics
+        ema = state.ema_params
+        if config.ema_decay > 0:
+            ema = polyak_update(params, ema, ema_weight(state.step, config.ema_decay))
+        return PPOTrainState(params=params, opt_state=opt_state, step=state.step + 1, ema_params=ema), metrics
 
     act, policy_act_with_info = make_act_fns(lambda params, obs: networks.policy.apply(params.policy, obs))
 
@@ -111,5 +116,8 @@ def make_learner(config: PPOConfig, encoder_factory: EncoderFactory, action_dim:
         action, info = policy_act_with_info(params, obs, key, deterministic)
         return action, {**info, "value": value(params, obs)}
 
-    return Learner(init=init, update=update, act=act, policy_params=lambda state: state.params,
-                   act_with_info=act_with_info, value=value)
+    def policy_params(state: PPOTrainState) -> PPOParams:  # evaluated and saved as the run's policy
+        return state.ema_params if config.ema_decay > 0 else state.params
+
+    return Learner(init=init, update=update, act=act, policy_params=policy_params, act_with_info=act_with_info,
+                   value=value, behaviour_params=lambda state: state.params)
