@@ -132,6 +132,7 @@ def test_the_selfplay_preset_is_ppo_over_every_controllable_agent():
     assert config.agents_per_env == config.selfplay.max_agents == 8
     assert config.reward.preset == "safety" and config.selfplay.approach_reward > 0  # the goal, not binary progress
     assert config.train.teacher == "idm" and config.algo_config.imitation_coef > 0  # taught by IDM on every agent
+    assert config.algo_config.ema_decay > 0  # the moving average is what is evaluated (checkpoints swing)
     assert preset_config("ppo-selfplay-navigation").reward.preset == "navigation"
     assert preset_config("ppo").reward.preset == "navigation" and not preset_config("ppo").is_selfplay
     changed = apply_overrides(config, ["selfplay.max_agents=4", "selfplay.crashed=obstacle"])
