@@ -216,9 +216,12 @@ _SECTION_FIELD = {"algo": "algo_config", "network": "network", "env": "env", "ob
                   "data": "data", "train": "train", "selfplay": "selfplay"}
 
 
+EXPERT_LABELLED = ("bc", "bc_sac")  # learners that always read Transition.expert_action
+
+
 def imitates(algo: str, algo_config: Any) -> bool:
     """Whether `algo` with `algo_config` reads a teacher's label per step: bc, bc_sac, ppo with imitation_coef > 0."""
-    return algo in ("bc", "bc_sac") or getattr(algo_config, "imitation_coef", 0.0) > 0
+    return algo in EXPERT_LABELLED or getattr(algo_config, "imitation_coef", 0.0) > 0
 
 
 def preset_config(name: str = DEFAULT_PRESET) -> TrainConfig:

@@ -26,7 +26,6 @@ from vmax_sim.env.selfplay import AgentStepOutput, SelfPlayEnv
 from vmax_sim.training.replay import TransitionReplay, replay_add, replay_sample
 
 OFF_POLICY = ("sac", "bc_sac", "bc")
-EXPERT_LABELLED = ("bc", "bc_sac")  # learners that read Transition.expert_action
 
 
 @struct.dataclass
