@@ -73,3 +73,29 @@ def test_pdm_agent_stops_behind_a_parked_car(parked_shards):
     assert result.summary["mode_options"]["agents"] == "pdm"
     assert result.episodes["other_collision"].tolist() == [0.0, 0.0]
     assert (x[:, 1, 10:] + 2.25 < PARKED_X - 2.25).all()  # its front bumper never reaches the parked car
+
+
+def test_learned_traffic_acts_in_the_units_of_the_evaluation_environment(parked_shards):
+    """A trained policy acts in [-1, 1], as its training environment took it. Around a rule-based SDC the evaluation
+    steps in physical units, so the agent's full brake must arrive as the model's 6 m/s^2 (it arrived as 1 m/s^2,
+    and learned traffic rear-ended an IDM SDC in a quarter of the scenes)."""
+    import jax.numpy as jnp
+
+    from vmax_sim.datatypes import sdc_action
+    from vmax_sim.env import Environment
+    from vmax_sim.env.agent_view import agent_view
+    from vmax_sim.evaluation.reactive import make_agent_fn
+    from vmax_sim.metrics import MetricsConfig
+    from vmax_sim.observation import ObservationConfig
+    from vmax_sim.policies.base import Policy
+
+    brake = Policy("brake", lambda params, state, observation, key: sdc_action(state, jnp.array([-1.0, 0.5])))
+    mode = EvalMode(name="reactive", agents="learned", agent_policy=(brake, None, ObservationConfig()),
+                    agent_run="a run")
+    state = jax.tree.map(lambda a: a[0], load_batch(small_data_config(parked_shards, include_agent_paths=True)))
+    for normalised, expected in ((False, [-6.0, 0.15]), (True, [-1.0, 0.5])):
+        env = Environment(EnvConfig(max_num_objects=8, normalize_actions=normalised))
+        agent_fn = make_agent_fn(mode, env, None, MetricsConfig(), ObservationConfig())
+        action, valid = agent_fn(None, agent_view(state, 1), jax.random.PRNGKey(0))
+        np.testing.assert_allclose(action, expected, rtol=1e-6)
+        assert bool(valid)

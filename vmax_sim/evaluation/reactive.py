@@ -76,8 +76,14 @@ def make_agent_fn(mode: EvalMode, env, policy: Policy, metrics_config: MetricsCo
     if mode.agents == "learned":
         agent_policy, agent_params, agent_obs_config = mode.agent_policy
         drive = policy_agent_fn(agent_policy, metrics_config, agent_obs_config)
-        return lambda params, view, key: drive(agent_params, view, key)
+        return lambda params, view, key: in_env_units(env, *drive(agent_params, view, key))
     return policy_agent_fn(policy, metrics_config, obs_config)
+
+
+def in_env_units(env, action: jax.Array, valid: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """A trained policy's action, in [-1, 1] as its training environment took it, in `env`'s convention: an
+    evaluation of a rule-based SDC steps in physical units, where -1 would brake at 1 m/s^2 instead of 6."""
+    return (action if env.config.normalize_actions else env.dynamics.denormalize(action)), valid
 
 
 def pdm_agent_fn(env, mode: EvalMode) -> AgentFn:
