@@ -29,10 +29,11 @@ parked_shards = modes_scenes.parked_shards  # the fixture
 K = 3  # agent slots: the SDC, the controllable agent, one empty slot
 
 
-def _rollout(shards, crashed: str, steps: int = 85):
+def _rollout(shards, crashed: str, steps: int = 85, at_goal: str = "leave"):
     """Zero actions (hold speed, straight) for `steps` steps: (outputs stacked over time, x of every object)."""
     pool = load_batch(small_data_config(shards, include_agent_paths=True))
-    env = SelfPlayEnv(EnvConfig(max_num_objects=8), selfplay=SelfPlayConfig(max_agents=K, crashed=crashed))
+    env = SelfPlayEnv(EnvConfig(max_num_objects=8),
+                      selfplay=SelfPlayConfig(max_agents=K, crashed=crashed, at_goal=at_goal))
     state = jax.jit(env.reset, static_argnums=1)(pool, 2, jax.random.PRNGKey(0))
     step = jax.jit(env.step)
     outs, xs = [], []
@@ -91,6 +92,21 @@ def test_a_crashed_agent_can_stay_as_a_still_obstacle(parked_shards, removed):
     assert crash == int(np.argmax(removed[1].terminated[:, 1]))  # same crash either way
 
 
+@pytest.mark.slow  # another compilation of the step (~35 s)
+def test_a_goal_reacher_can_drive_on_to_the_time_limit(parked_shards, removed):
+    """`selfplay.at_goal=drive_on`: the SDC gets its goal reward once, keeps driving (and learning) past its goal,
+    and its episode ends at the scene's time limit with the goal counted."""
+    _, left, _ = removed
+    goal_step = int(np.argmax(left.episode_flags["goal_reached"][:, 0]))
+    _, out, xs = _rollout(parked_shards, "remove", steps=goal_step + 10, at_goal="drive_on")
+    assert not out.terminated[:, 0].any()  # the goal no longer ends its episode
+    end = int(np.flatnonzero(out.truncated[:, 0])[0])  # the scene's time limit (then it restarts)
+    assert end > goal_step + 1 and out.active[goal_step + 1:end + 1, 0].all()
+    assert xs[end - 1, 0, 0] > xs[goal_step, 0, 0] + 0.5  # it drove on past its goal
+    assert int(np.sum(out.reward[:end + 1, 0] > 1.0)) == 1  # one goal reward, no approach term after it
+    assert out.episode_flags["goal_reached"][end, 0]  # counted when the scene's time is up
+
+
 @pytest.mark.slow  # a third compilation of the step, with IDM on every agent's view (~40 s)
 def test_a_teacher_labels_every_agent_and_drives_them_round_the_parked_car(parked_shards):
     """`SelfPlayEnv(teacher=...)` runs the rule driver on each agent's own view: its labels fill the rows of the
@@ -110,6 +126,43 @@ def test_a_teacher_labels_every_agent_and_drives_them_round_the_parked_car(parke
     assert outcomes["goal_reached"][:, 0].all() and not outcomes["overlap"][:, 0].any()
     with pytest.raises(ValueError, match="teacher"):  # no policy and no teacher: nothing would drive
         episode_outcomes(SelfPlayEnv(EnvConfig(max_num_objects=8)), None, None, pool, jax.random.PRNGKey(0))
+
+
+@pytest.mark.slow  # one more compilation of the step, with IDM driving the ruled SDCs (~40 s)
+def test_ruled_agents_are_driven_by_the_rule_and_teach_nothing(parked_shards, removed):
+    """`selfplay.rule_sdc` / `rule_agents`: IDM drives that share of SDCs / other agents; their rows carry no
+    experience and end no episode, while the agents beside them still learn."""
+    from vmax_sim.policies.teacher import idm_teacher
+
+    pool = load_batch(small_data_config(parked_shards, include_agent_paths=True))
+    shares = SelfPlayConfig(max_agents=K, rule_sdc=0.5, rule_agents=0.25)
+    half = SelfPlayEnv(EnvConfig(max_num_objects=8), selfplay=shares, rule_driver=idm_teacher)
+    drawn = jax.jit(half.reset, static_argnums=1)(pool, 400, jax.random.PRNGKey(1)).ruled
+    assert 0.4 < float(np.mean(drawn[:, 0])) < 0.6 and 0.2 < float(np.mean(drawn[:, 1:])) < 0.3  # drawn per agent
+    env = SelfPlayEnv(EnvConfig(max_num_objects=8), selfplay=SelfPlayConfig(max_agents=K, rule_sdc=1.0),
+                      rule_driver=idm_teacher)
+    state = jax.jit(env.reset, static_argnums=1)(pool, 2, jax.random.PRNGKey(0))
+    assert state.ruled[:, 0].all() and not state.ruled[:, 1:].any()
+    step = jax.jit(env.step)
+    outs, xs = [], []
+    for _ in range(30):
+        state, out = step(state, jnp.zeros((2 * K, env.action_dim)), pool)
+        outs.append(jax.device_get(out))
+        xs.append(np.asarray(state.sim.current_sim_trajectory.x[..., 0]))
+    out = jax.tree.map(lambda *a: np.stack(a), *outs)
+    assert not out.active[:, 0].any() and not out.done[:, 0].any()  # the ruled SDC teaches nothing
+    assert out.active[0, 1]  # the agent beside it does
+    zero_action_x = removed[2][:30, 0, 0]  # the same SDC under zero actions
+    assert np.abs(np.stack(xs)[:, 0, 0] - zero_action_x).max() > 0.5  # it moved by the rule, not by the policy
+
+
+def test_rule_shares_are_shares_and_need_a_driver():
+    with pytest.raises(ValueError, match="rule_sdc"):
+        SelfPlayConfig(rule_sdc=1.5)
+    with pytest.raises(ValueError, match="rule_agents"):
+        SelfPlayConfig(rule_agents=-0.1)
+    with pytest.raises(ValueError, match="rule_driver"):
+        SelfPlayEnv(EnvConfig(max_num_objects=8), selfplay=SelfPlayConfig(rule_sdc=0.5))
 
 
 def test_ppo_imitates_a_teacher_only_when_asked_and_in_any_order():
@@ -133,6 +186,7 @@ def test_the_selfplay_preset_is_ppo_over_every_controllable_agent():
     assert config.reward.preset == "safety" and config.selfplay.approach_reward > 0  # the goal, not binary progress
     assert config.train.teacher == "idm" and config.algo_config.imitation_coef > 0  # taught by IDM on every agent
     assert config.algo_config.ema_decay > 0  # the moving average is what is evaluated (checkpoints swing)
+    assert config.selfplay.at_goal == "drive_on"  # goal reachers keep driving, as traffic must
     assert preset_config("ppo-selfplay-navigation").reward.preset == "navigation"
     assert preset_config("ppo").reward.preset == "navigation" and not preset_config("ppo").is_selfplay
     changed = apply_overrides(config, ["selfplay.max_agents=4", "selfplay.crashed=obstacle"])
@@ -143,6 +197,8 @@ def test_the_selfplay_preset_is_ppo_over_every_controllable_agent():
         apply_overrides(preset_config("sac"), ["env.controlled=controllable"])
     with pytest.raises(ValueError, match="selfplay.crashed"):
         apply_overrides(config, ["selfplay.crashed=vanish"])
+    with pytest.raises(ValueError, match="selfplay.at_goal"):
+        apply_overrides(config, ["selfplay.at_goal=stop"])
 
 
 def test_selfplay_summary_counts_agents_and_scenes():

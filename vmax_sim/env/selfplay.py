@@ -8,9 +8,10 @@ over agents. The learner sees a flat batch of B * K rows (scene-major) with `act
 are real agents still acting; everything else (empty slots, agents already finished) is masked.
 
 An agent's episode ends when it collides, leaves the road or runs a red light (as `EnvConfig.terminate_on`),
-when it reaches its goal (within `goal_radius_m` of its last logged position: GPUDrive's goal-reaching), or when
-the scene reaches its time limit. A goal reacher leaves the scene; a crashed agent leaves it too
-(`crashed="remove"`: others stop seeing it) or stays where it stopped as a still obstacle (`"obstacle"`).
+when it reaches its goal (within `goal_radius_m` of its last logged position: GPUDrive's goal-reaching; with
+`at_goal="drive_on"` it drives on instead), or when the scene reaches its time limit. A goal reacher leaves the
+scene; a crashed agent leaves it too (`crashed="remove"`: others stop seeing it) or stays where it stopped as a
+still obstacle (`"obstacle"`).
 Objects that are not agents replay the log. A scene restarts on the next pool scenario when no agent is
 left acting or at its time limit; its slots then hold new agents.
 
@@ -37,6 +38,7 @@ from vmax_sim.observation import Observation, ObservationConfig
 from vmax_sim.rewards import RewardConfig, compute_reward
 
 CRASHED_CHOICES = ("remove", "obstacle")
+AT_GOAL_CHOICES = ("leave", "drive_on")
 AGENT_FLAGS = (*EPISODE_FLAGS, "goal_reached")  # per-agent episode indicators
 
 
@@ -49,6 +51,15 @@ class SelfPlayConfig:
     # log, so an agent slower than its log never reaches it, and the binary progress term does not tell)
     approach_reward: float = 0.05
     crashed: str = "remove"  # "remove": a crashed agent leaves the scene; "obstacle": it stays, standing still
+    # "leave": a goal reacher's episode ends and it leaves the scene (GPUDrive's); "drive_on": it keeps driving to
+    # the scene's time limit after its goal reward (no approach term then), as learned traffic must in evaluation
+    at_goal: str = "leave"
+    # shares of SDCs and of the other agents driven by the rule driver (`SelfPlayEnv.rule_driver`: IDM at the speed
+    # limit) instead of the policy, drawn per agent at the scene's start; their rows teach nothing, but the agents
+    # around them meet a driver that stops where its log went on (a red light it reaches late), which students
+    # keeping their logged pace never show each other
+    rule_sdc: float = 0.0
+    rule_agents: float = 0.0
 
     def __post_init__(self) -> None:
         if self.max_agents < 1:
@@ -57,6 +68,15 @@ class SelfPlayConfig:
             raise ValueError(f"selfplay.goal_radius_m must be positive, got {self.goal_radius_m}")
         if self.crashed not in CRASHED_CHOICES:
             raise ValueError(f"selfplay.crashed must be one of {CRASHED_CHOICES}, got {self.crashed!r}")
+        if self.at_goal not in AT_GOAL_CHOICES:
+            raise ValueError(f"selfplay.at_goal must be one of {AT_GOAL_CHOICES}, got {self.at_goal!r}")
+        for name in ("rule_sdc", "rule_agents"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"selfplay.{name} must be a share in [0, 1], got {getattr(self, name)}")
+
+    @property
+    def rules_some(self) -> bool:
+        return self.rule_sdc > 0 or self.rule_agents > 0
 
 
 @struct.dataclass
@@ -65,6 +85,7 @@ class SelfPlayState:
     slots: jax.Array  # (B, K) int32, object slot of each agent
     present: jax.Array  # (B, K) bool, the slot holds an agent this episode
     active: jax.Array  # (B, K) bool, the agent still acts
+    ruled: jax.Array  # (B, K) bool, the agent is driven by the rule driver this episode: its row teaches nothing
     gone: jax.Array  # (B, N) bool, objects taken out of the scene (finished agents)
     still: jax.Array  # (B, N) bool, crashed agents kept as standing obstacles
     goal_xy: jax.Array  # (B, K, 2) float32, each agent's last logged position in the episode
@@ -119,13 +140,19 @@ class SelfPlayEnv:
     # a factory (core Environment) -> a rule driver, one state -> the SDC's action (A,) in [-1, 1]
     # (`vmax_sim.policies.teacher`): run on every agent's view, it labels each agent's step (`expert_action`)
     teacher: Callable[[Environment], Callable[[SimulatorState], jax.Array]] | None = None
+    # the same kind of factory: the driver of the agents `selfplay.rule_sdc` / `rule_agents` hand to rules
+    rule_driver: Callable[[Environment], Callable[[SimulatorState], jax.Array]] | None = None
 
     def __post_init__(self) -> None:
         check_learning_settings(self.env_config, self.reward_config, self.action_repeat)
+        if self.selfplay.rules_some and self.rule_driver is None:
+            raise ValueError("selfplay.rule_sdc or rule_agents > 0 needs SelfPlayEnv(rule_driver=...) to drive them")
         config = dataclasses.replace(self.env_config, normalize_actions=True, controlled="controllable")
         object.__setattr__(self, "env_config", config)
         object.__setattr__(self, "core", Environment(config))
         object.__setattr__(self, "_teacher_fn", None if self.teacher is None else self.teacher(self.core))
+        ruling = self.rule_driver is not None and self.selfplay.rules_some
+        object.__setattr__(self, "_rule_fn", self.rule_driver(self.core) if ruling else None)
 
     @property
     def action_dim(self) -> int:
@@ -165,9 +192,11 @@ class SelfPlayEnv:
     # ------------------------------------------------------------------ one scene (vmapped below)
 
     def _start(self, sim: SimulatorState, key: jax.Array):
-        """Reset one scene: its agents, their goals, arcs, metrics and observations."""
-        del key  # the start is deterministic (observation noise starts at the first step)
+        """Reset one scene: its agents, their goals, arcs, metrics and observations; which agents rules drive
+        (drawn with `key`; the rest of the start is deterministic)."""
         k = self.selfplay.max_agents
+        share = jnp.full(k, self.selfplay.rule_agents).at[0].set(self.selfplay.rule_sdc)
+        ruled = jax.random.uniform(key, (k,)) < share
         sim = with_sdc_route(self.core.reset(sim))
         first = self.env_config.first_policy_timestep
         others, others_valid = choose_agents(sim, max(k - 1, 1), first)
@@ -192,7 +221,7 @@ class SelfPlayEnv:
         none = jnp.zeros(sim.num_objects, bool)
         signs = stop_sign_points(sim)  # as LearningEnv's traffic: once per scene, not at every step
         labels = self._labels(sim, slots, present, signs)
-        return sim, slots, present, present, none, none, goals, arcs, metrics, signs, (observation, labels)
+        return sim, slots, present, present, ruled, none, none, goals, arcs, metrics, signs, (observation, labels)
 
     def _move(self, sim: SimulatorState, slots: jax.Array, acting: jax.Array, action: jax.Array,
               gone: jax.Array, still: jax.Array) -> SimulatorState:
@@ -210,9 +239,11 @@ class SelfPlayEnv:
         now = now.replace(valid=now.valid & ~gone[:, None])
         return sim.replace(sim_trajectory=update_timestep(sim.sim_trajectory, sim.timestep, now), current_sim=now)
 
-    def _substep(self, parts, slots, arcs, goals, action):
-        """One simulator step of the held actions: agents still acting move, score and may finish."""
+    def _substep(self, parts, slots, arcs, goals, reached_before, action):
+        """One simulator step of the held actions: agents still acting move, score and may finish.
+        reached_before (K,): the agent reached its goal at an earlier policy step (`at_goal="drive_on"`)."""
         sim, acting, gone, still, metrics, reward, terminated, goal, flags = parts
+        heading = ~(reached_before | goal)  # still on the way to its goal
         distance_before = self._goal_distance(sim, slots, goals)
         sim = self._move(sim, slots, acting, action, gone, still)
         shared, new_metrics = jax.vmap(lambda slot, a: self._queries(sim, slot, a))(slots, arcs)
@@ -221,19 +252,20 @@ class SelfPlayEnv:
             crashed = crashed | (new_metrics[TERMINATION_METRICS[name]] > 0.5)
         crashed = acting & crashed
         distance = self._goal_distance(sim, slots, goals)
-        reached = acting & ~crashed & (distance < self.selfplay.goal_radius_m)
+        reached = acting & ~crashed & heading & (distance < self.selfplay.goal_radius_m)
         step_reward = compute_reward(new_metrics, metrics, self.reward_config, self.metrics_config)
         step_reward = (step_reward + self.selfplay.goal_reward * reached
-                       + self.selfplay.approach_reward * (distance_before - distance))
+                       + self.selfplay.approach_reward * heading * (distance_before - distance))
         reward = reward + jnp.where(acting, step_reward, 0.0)
         flags = {name: flags[name] | (acting & (new_metrics[name] > 0.5)) for name in EPISODE_FLAGS}
         metrics = jax.tree.map(lambda n, o: jnp.where(acting, n, o), new_metrics, metrics)
         finished = jnp.where(acting, slots, sim.num_objects)
         leaving = crashed if self.selfplay.crashed == "remove" else jnp.zeros_like(crashed)
-        gone = gone.at[jnp.where(reached | leaving, finished, sim.num_objects)].set(True, mode="drop")
+        ends = reached if self.selfplay.at_goal == "leave" else jnp.zeros_like(reached)
+        gone = gone.at[jnp.where(ends | leaving, finished, sim.num_objects)].set(True, mode="drop")
         still = still.at[jnp.where(crashed & ~leaving, finished, sim.num_objects)].set(True, mode="drop")
-        acting = acting & ~crashed & ~reached
-        parts = (sim, acting, gone, still, metrics, reward, terminated | crashed | reached, goal | reached, flags)
+        acting = acting & ~crashed & ~ends
+        parts = (sim, acting, gone, still, metrics, reward, terminated | crashed | ends, goal | reached, flags)
         return parts, shared
 
     @staticmethod
@@ -242,17 +274,22 @@ class SelfPlayEnv:
         now = sim.current_sim_trajectory
         return jnp.hypot(now.x[slots, 0] - goals[:, 0], now.y[slots, 0] - goals[:, 1])
 
-    def _advance(self, sim, slots, active, gone, still, goals, arcs, metrics, signs, action, key):
+    def _advance(self, sim, slots, active, ruled, gone, still, goals, arcs, metrics, signs, reached_before, action,
+                 key):
         """One policy step of one scene: actions (K, A) held for `action_repeat` simulator steps, or until the
-        scene's time limit. The observation reuses the last step's queries."""
+        scene's time limit (a ruled agent's action is the rule driver's). The observation reuses the last step's
+        queries."""
+        if self._rule_fn is not None:
+            rule_action = jax.vmap(lambda slot: self._rule_fn(agent_view(sim, slot, signs)))(slots)
+            action = jnp.where(ruled[:, None], rule_action, action)
         zeros = jnp.zeros_like(active)
         flags = {name: zeros for name in EPISODE_FLAGS}
         parts = (sim, active, gone, still, metrics, jnp.zeros(active.shape, jnp.float32), zeros, zeros, flags)
-        parts, shared = self._substep(parts, slots, arcs, goals, action)
+        parts, shared = self._substep(parts, slots, arcs, goals, reached_before, action)
         truncated_scene = self._time_is_up(parts[0])
         for _ in range(self.action_repeat - 1):  # unrolled: repeats are few
             keep = _selector(~truncated_scene)
-            stepped, new_shared = self._substep(parts, slots, arcs, goals, action)
+            stepped, new_shared = self._substep(parts, slots, arcs, goals, reached_before, action)
             old_sim, new_sim = parts[0], stepped[0]
             # only the simulated trajectory and the timestep change: never select (copy) the map index
             sim = old_sim.replace(sim_trajectory=keep(new_sim.sim_trajectory, old_sim.sim_trajectory),
@@ -265,7 +302,7 @@ class SelfPlayEnv:
         truncated = active & ~terminated & truncated_scene
         keys = jax.random.split(key, slots.shape[0])
         observation = jax.vmap(lambda slot, q, k: self._observe(sim, slot, q, k))(slots, shared, keys)
-        scene_done = truncated_scene | ~jnp.any(acting)
+        scene_done = truncated_scene | ~jnp.any(acting & ~ruled)  # no learner left
         return (sim, acting, gone, still, metrics, reward, terminated, truncated, flags,
                 (observation, self._labels(sim, slots, acting, signs)), scene_done)
 
@@ -280,10 +317,10 @@ class SelfPlayEnv:
         pool_size = pool.timestep.shape[0]
         scenes = jax.tree.map(lambda a: a[jnp.arange(batch_size) % pool_size], pool)
         parts = jax.vmap(self._start)(scenes, jax.random.split(key, batch_size))
-        sim, slots, present, active, gone, still, goals, arcs, metrics, signs, (observation, labels) = parts
+        sim, slots, present, active, ruled, gone, still, goals, arcs, metrics, signs, (observation, labels) = parts
         shape = slots.shape
         return SelfPlayState(
-            sim=sim, slots=slots, present=present, active=active, gone=gone, still=still, goal_xy=goals,
+            sim=sim, slots=slots, present=present, active=active, ruled=ruled, gone=gone, still=still, goal_xy=goals,
             arcs=arcs, metrics=metrics, signs=signs, observation=_flat(observation), expert_action=_flat(labels),
             episode_return=jnp.zeros(shape),
             episode_length=jnp.zeros(shape, jnp.int32), episode_flags={n: jnp.zeros(shape, bool) for n in AGENT_FLAGS},
@@ -295,24 +332,27 @@ class SelfPlayEnv:
         batch, k = state.slots.shape
         action = jnp.clip(action, -1.0, 1.0).reshape(batch, k, -1)
         key, step_key = jax.random.split(state.key)
-        outs = jax.vmap(self._advance)(state.sim, state.slots, state.active, state.gone, state.still, state.goal_xy,
-                                       state.arcs, state.metrics, state.signs, action,
-                                       jax.random.split(step_key, batch))
+        outs = jax.vmap(self._advance)(state.sim, state.slots, state.active, state.ruled, state.gone, state.still,
+                                       state.goal_xy, state.arcs, state.metrics, state.signs,
+                                       state.episode_flags["goal_reached"], action, jax.random.split(step_key, batch))
         sim, acting, gone, still, metrics, reward, terminated, truncated, seen, (next_obs, labels), scene_done = outs
         active = state.active
         done = terminated | truncated
+        learner = active & ~state.ruled  # the rows that carry experience and episode statistics
+        ended = done & learner
         episode_return = state.episode_return + reward
         episode_length = state.episode_length + active.astype(jnp.int32)
         flags = {name: state.episode_flags[name] | seen[name] for name in AGENT_FLAGS}
         output = AgentStepOutput(
             observation=state.observation, action=action.reshape(batch * k, -1),
             expert_action=state.expert_action, reward=_flat(reward),
-            terminated=_flat(terminated), truncated=_flat(truncated), next_observation=_flat(next_obs),
-            episode_return=_flat(jnp.where(done, episode_return, 0.0)),
-            episode_length=_flat(jnp.where(done, episode_length, 0)),
-            episode_flags={name: _flat(flag & done) for name, flag in flags.items()},
-            episode_progress=_flat(jnp.where(done, metrics["progress_ratio"], 0.0)),
-            active=_flat(active), scene_done=scene_done)
+            terminated=_flat(terminated & learner), truncated=_flat(truncated & learner),
+            next_observation=_flat(next_obs),
+            episode_return=_flat(jnp.where(ended, episode_return, 0.0)),
+            episode_length=_flat(jnp.where(ended, episode_length, 0)),
+            episode_flags={name: _flat(flag & ended) for name, flag in flags.items()},
+            episode_progress=_flat(jnp.where(ended, metrics["progress_ratio"], 0.0)),
+            active=_flat(learner), scene_done=scene_done)
         running = state.replace(
             sim=sim, active=acting, gone=gone, still=still, metrics=metrics, observation=_flat(next_obs),
             expert_action=_flat(labels),
@@ -329,7 +369,7 @@ class SelfPlayEnv:
 
         def restart_one(i, parts):
             scenario = (state.next_scenario + i) % pool_size
-            fresh = self._start(jax.tree.map(lambda a: a[scenario], pool), state.key)
+            fresh = self._start(jax.tree.map(lambda a: a[scenario], pool), jax.random.fold_in(state.key, rows[i]))
             scene_parts, observation = parts
             *fresh_scene, fresh_obs = fresh
             scene_parts = jax.tree.map(
@@ -340,13 +380,13 @@ class SelfPlayEnv:
                 observation, fresh_obs)
             return scene_parts, observation
 
-        kept = ((state.sim, state.slots, state.present, state.active, state.gone, state.still, state.goal_xy,
-                 state.arcs, state.metrics, state.signs), (state.observation, state.expert_action))
+        kept = ((state.sim, state.slots, state.present, state.active, state.ruled, state.gone, state.still,
+                 state.goal_xy, state.arcs, state.metrics, state.signs), (state.observation, state.expert_action))
         scene_parts, observation = jax.lax.cond(
             num_done > 0, lambda parts: jax.lax.fori_loop(0, num_done, restart_one, parts), lambda parts: parts, kept)
-        sim, slots, present, active, gone, still, goals, arcs, metrics, signs = scene_parts
+        sim, slots, present, active, ruled, gone, still, goals, arcs, metrics, signs = scene_parts
         observation, labels = observation
-        return state.replace(sim=sim, slots=slots, present=present, active=active, gone=gone, still=still,
+        return state.replace(sim=sim, slots=slots, present=present, active=active, ruled=ruled, gone=gone, still=still,
                              goal_xy=goals, arcs=arcs, metrics=metrics, signs=signs, observation=observation,
                              expert_action=labels,
                              next_scenario=((state.next_scenario + num_done) % pool_size).astype(jnp.int32))

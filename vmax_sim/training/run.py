@@ -110,7 +110,7 @@ def components(config: TrainConfig):
     reused."""
     if config.is_selfplay:
         env = SelfPlayEnv(config.env, config.obs, config.reward, selfplay=config.selfplay,
-                          action_repeat=action_repeat(config), teacher=teacher_of(config))
+                          action_repeat=action_repeat(config), teacher=teacher_of(config), rule_driver=TEACHERS["idm"])
     else:
         env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.imitates,
                           action_repeat=action_repeat(config), traffic=TRAFFIC_DRIVERS[config.train.traffic],
@@ -706,7 +706,9 @@ def selfplay_env_and_act(config):
     """The self-play evaluation environment of a run's settings (every simulator step, as evaluation acts) and
     its learner's deterministic act(params, observation, key)."""
     learner = components(config)[1]
-    env = SelfPlayEnv(config.env, config.obs, config.reward, selfplay=config.selfplay)
+    # the policy drives every agent, and goals end episodes as GPUDrive's do, whatever the run trained with
+    every_agent = dataclasses.replace(config.selfplay, rule_sdc=0.0, rule_agents=0.0, at_goal="leave")
+    env = SelfPlayEnv(config.env, config.obs, config.reward, selfplay=every_agent)
     return env, _deterministic_act(learner)
 
 
