@@ -240,3 +240,27 @@ def test_two_processes_train_and_resume_to_the_curve_of_one_process_with_two_dev
     assert float(_rows(two / "metrics.csv")[0]["learner/critic_loss"]) != 0.0  # the learner learnt from chunk one
     _assert_same_rows(_rows(one / "metrics.csv"), _rows(two / "metrics.csv"))
     _assert_same_rows(_rows(one / "eval.csv"), _rows(two / "eval.csv"))
+
+
+@pytest.mark.slow  # two launches of a tiny self-play run: ~2 min of 2 quiet cores' time
+def test_selfplay_trains_over_two_processes_to_the_curve_of_one_process_with_two_devices(synthetic_shards, tmp_path):
+    """`ppo-selfplay` data-parallel: the agent rows of each process's scenes, per-agent GAE and masks, give the same
+    learning curve and evaluations (self-play goals included) as one process with two devices."""
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    env.pop("XLA_FLAGS", None)
+    from tests.training.test_train import _cli_overrides
+
+    args = ["train", "--preset", "ppo-selfplay", "--quiet", *_cli_overrides(synthetic_shards), "selfplay.max_agents=4",
+            "algo.num_envs=4", "algo.unroll_length=4", "algo.num_minibatches=2", "algo.batch_size=4",
+            "train.chunk_steps=1", "train.total_env_steps=32", "train.checkpoint_every=16"]
+    one, two = tmp_path / "one-process", tmp_path / "two-processes"
+    reference = _launch([*args, "--out", str(one)], {**env, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"})
+    outputs = _finish(_launch([*args, "--out", str(two)], env, processes=2))
+    assert "data-parallel over 2 devices of 2 processes" in outputs[0]
+    _finish(reference)
+    rows = _rows(two / "metrics.csv")
+    assert rows and float(rows[-1]["agent_steps"]) > float(rows[-1]["env_steps"])  # several agents per scene
+    _assert_same_rows(_rows(one / "metrics.csv"), rows)
+    evaluation = _rows(two / "eval.csv")
+    assert "selfplay/goal_reached" in evaluation[0]
+    _assert_same_rows(_rows(one / "eval.csv"), evaluation)
