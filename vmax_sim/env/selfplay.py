@@ -75,7 +75,7 @@ class SelfPlayConfig:
                 raise ValueError(f"selfplay.{name} must be a share in [0, 1], got {getattr(self, name)}")
 
     @property
-    def rules_some(self) -> bool:
+    def has_rule_drivers(self) -> bool:
         return self.rule_sdc > 0 or self.rule_agents > 0
 
 
@@ -145,13 +145,13 @@ class SelfPlayEnv:
 
     def __post_init__(self) -> None:
         check_learning_settings(self.env_config, self.reward_config, self.action_repeat)
-        if self.selfplay.rules_some and self.rule_driver is None:
+        if self.selfplay.has_rule_drivers and self.rule_driver is None:
             raise ValueError("selfplay.rule_sdc or rule_agents > 0 needs SelfPlayEnv(rule_driver=...) to drive them")
         config = dataclasses.replace(self.env_config, normalize_actions=True, controlled="controllable")
         object.__setattr__(self, "env_config", config)
         object.__setattr__(self, "core", Environment(config))
         object.__setattr__(self, "_teacher_fn", None if self.teacher is None else self.teacher(self.core))
-        ruling = self.rule_driver is not None and self.selfplay.rules_some
+        ruling = self.rule_driver is not None and self.selfplay.has_rule_drivers
         object.__setattr__(self, "_rule_fn", self.rule_driver(self.core) if ruling else None)
 
     @property
