@@ -151,7 +151,7 @@ class SelfPlayEnv:
         object.__setattr__(self, "env_config", config)
         object.__setattr__(self, "core", Environment(config))
         object.__setattr__(self, "_teacher_fn", None if self.teacher is None else self.teacher(self.core))
-        ruling = self.rule_driver is not None and self.selfplay.has_rule_drivers
+        ruling = self.selfplay.has_rule_drivers  # a driver is there (checked above)
         object.__setattr__(self, "_rule_fn", self.rule_driver(self.core) if ruling else None)
 
     @property
