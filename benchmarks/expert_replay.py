@@ -154,7 +154,8 @@ def convert_group(group: Group, realdata: Path, out: Path, num_objects: int = NU
     from scenariomax.schema import Sizes
     from scenariomax.sources.registry import make_source
 
-    source = make_source(group.dataset, src=str(realdata / group.src), sizes=Sizes(num_objects=num_objects))
+    source = make_source(group.dataset, src=str(realdata / group.src), sizes=Sizes(num_objects=num_objects),
+                         orient_edges=False)  # as `scenariomax convert`: the enrichment orients road edges
     transform, transform_settings = make_transform()
     # one worker: in-process, no pool to start for a handful of files
     result = convert(source, ConvertSettings(out=out, workers=1, progress=False, transform=transform,

@@ -161,9 +161,9 @@ def _convert(raw: str, out: Path, sdc_paths: str) -> tuple[dict, set]:
     from scenariomax.sources.womd import WomdSource
 
     transform, settings = make_transform()
-    convert(WomdSource(raw, sdc_paths=sdc_paths), ConvertSettings(out=out, workers=1, progress=False,
-                                                                  transform=transform,
-                                                                  transform_settings=settings))
+    source = WomdSource(raw, sdc_paths=sdc_paths, orient_edges=False)  # the enrichment orients road edges
+    convert(source, ConvertSettings(out=out, workers=1, progress=False, transform=transform,
+                                    transform_settings=settings))
     if not (out / "manifest.json").is_file():
         return {}, set()
     notes = json.loads((out / "manifest.json").read_text()).get("notes", [])

@@ -33,7 +33,8 @@ REAL = [  # (label, dataset, path under the realdata folder)
 
 def _convert(dataset: str, src: str | None, out: Path, compression: str, num_synthetic: int) -> tuple[int, float]:
     sizes = Sizes()
-    source = make_source(dataset, src=src, sizes=sizes, num_scenarios=num_synthetic)
+    source = make_source(dataset, src=src, sizes=sizes, num_scenarios=num_synthetic,
+                         orient_edges=False)  # as `scenariomax convert`: the enrichment orients road edges
     transform, transform_settings = make_transform()
     settings = ConvertSettings(out=out, sizes=sizes, workers=1, progress=False, transform=transform,
                                transform_settings=transform_settings, compression=compression, overwrite=True)

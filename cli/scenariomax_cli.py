@@ -156,7 +156,8 @@ def convert(dataset, src, maps, num_scenarios, seed, knobs, stride_steps, num_ob
     if sdc_paths != "auto" and dataset != "womd":
         raise click.UsageError(f"--sdc-paths applies to --dataset womd, not {dataset}")
     source = make_source(dataset, src=src, sizes=sizes, num_scenarios=num_scenarios, seed=seed, maps=maps,
-                         stride_steps=stride_steps, sdc_paths=sdc_paths)
+                         stride_steps=stride_steps, sdc_paths=sdc_paths,
+                         orient_edges=no_enrich)  # the enrichment orients road edges itself: once is enough
     if knobs is not None:
         source = dataclasses.replace(source, knobs=knobs)
     _run_conversion(source, out, workers, shard_size, resume, overwrite, split, engine, address, sizes,

@@ -15,9 +15,10 @@ DATASETS = ("synthetic", "womd", "nuplan", "av2", "scenarionet", "gpudrive")
 
 def make_source(dataset: str, *, src: str | None = None, sizes: Sizes | None = None, num_scenarios: int = 100,
                 seed: int = 0, maps: str | None = None, stride_steps: int | None = None,
-                sdc_paths: str = "auto") -> Source:
+                sdc_paths: str = "auto", orient_edges: bool = True) -> Source:
     """Builds the Source for a dataset name; raises InputError with a one-line reason. `sdc_paths`
-    (WOMD Scenario protos): "auto" (Waymo's own paths when present), "waymo" or "reconstruct"."""
+    (WOMD Scenario protos): "auto" (Waymo's own paths when present), "waymo" or "reconstruct". `orient_edges`
+    False: WOMD and ScenarioNet maps keep their road edges as written (when the enrichment orients them)."""
     sizes = sizes or Sizes()
     if dataset == "synthetic":
         from scenariomax.sources.synthetic import SyntheticSource
@@ -33,7 +34,7 @@ def make_source(dataset: str, *, src: str | None = None, sizes: Sizes | None = N
     if dataset == "womd":
         from scenariomax.sources.womd import WomdSource
 
-        return WomdSource(src=src, sizes=sizes, sdc_paths=sdc_paths)
+        return WomdSource(src=src, sizes=sizes, sdc_paths=sdc_paths, orient_edges=orient_edges)
     if dataset == "av2":
         from scenariomax.sources.av2 import Av2Source
 
@@ -41,7 +42,7 @@ def make_source(dataset: str, *, src: str | None = None, sizes: Sizes | None = N
     if dataset == "scenarionet":
         from scenariomax.sources.scenarionet import ScenarioNetSource
 
-        return ScenarioNetSource(src=src, sizes=sizes)
+        return ScenarioNetSource(src=src, sizes=sizes, orient_edges=orient_edges)
     if dataset == "gpudrive":
         from scenariomax.sources.gpudrive import GpuDriveSource
 

@@ -484,9 +484,10 @@ def _feature_points(feature: Mapping, rg_type: int) -> np.ndarray:
     return points[np.all(finite32(points), axis=1)]  # a NaN point would poison the resampling
 
 
-def map_polylines(features: Mapping, ids: Mapping, speed_limits: bool = True
+def map_polylines(features: Mapping, ids: Mapping, speed_limits: bool = True, orient_edges: bool = True
                   ) -> tuple[list[MapPolyline], list[LaneLinks]]:
-    """The roadgraph polylines and lane links of a map; `speed_limits` False: the lanes' values are placeholders."""
+    """The roadgraph polylines and lane links of a map; `speed_limits` False: the lanes' values are placeholders;
+    `orient_edges` False: road edges as written (see `ScenarioNetSource`)."""
     polylines, links = [], []
     for key, feature in features.items():
         if not isinstance(feature, Mapping):
@@ -512,6 +513,8 @@ def map_polylines(features: Mapping, ids: Mapping, speed_limits: bool = True
     if total > MAX_MAP_POINTS:
         raise ScenarioBuildError(f"map of {total} roadgraph points at {DEFAULT_SPACING_M:g} m is more than the "
                                  f"{MAX_MAP_POINTS} allowed")
+    if not orient_edges:
+        return polylines, links
     return orient_road_edges(polylines, sch.ROAD_EDGE_TYPES, sch.LANE_TYPES), links
 
 
@@ -749,19 +752,21 @@ def no_window_reason(sdc_key, sdc_valid: np.ndarray, starts: list[int], num_past
 
 
 def description_windows(desc: Mapping, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE,
-                        default_id: str = "unnamed") -> Iterator[Scenario | ScenarioBuildError]:
+                        default_id: str = "unnamed", orient_edges: bool = True
+                        ) -> Iterator[Scenario | ScenarioBuildError]:
     """Every 91-step window (SDC valid at its current step) of one scenario description, fitted to the budget."""
     if not isinstance(desc, Mapping) or not isinstance(desc.get("tracks"), Mapping):
         yield ScenarioBuildError("not a ScenarioNet scenario description (no 'tracks' dict)")
         return
     scenario_id = scenario_name(desc, default_id)
     try:
-        yield from _windows(desc, sizes, stride, scenario_id)
+        yield from _windows(desc, sizes, stride, scenario_id, orient_edges)
     except ScenarioBuildError as error:
         yield ScenarioBuildError(f"scenario {scenario_id}: {error}")
 
 
-def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iterator[Scenario]:
+def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str, orient_edges: bool = True
+             ) -> Iterator[Scenario]:
     meta = as_mapping(desc.get("metadata"))
     tracks = desc["tracks"]
     if not tracks or len(tracks) > MAX_TRACKS:
@@ -805,7 +810,7 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str) -> Iter
     speed_limits = map_has_speed_limits(desc, meta)
     if not speed_limits:
         file_notes["speed_limits_ignored"] = "the writer's constant placeholder on every lane (no limits in this map)"
-    polylines, links = map_polylines(features, map_ids, speed_limits=speed_limits)
+    polylines, links = map_polylines(features, map_ids, speed_limits=speed_limits, orient_edges=orient_edges)
     roadgraph = polylines_to_roadgraph(polylines)
     lane_graph = lane_graph_arrays(links, sizes.num_lane_links)
     light_states, unread_entries = light_table(desc.get("dynamic_map_states"), num_steps)

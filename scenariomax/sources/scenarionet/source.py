@@ -77,6 +77,7 @@ class ScenarioNetSource:
     src: str
     sizes: Sizes | None = None
     window_stride: int = DEFAULT_WINDOW_STRIDE
+    orient_edges: bool = True  # as `WomdSource.orient_edges`
     name: str = SOURCE_NAME
 
     @property
@@ -97,7 +98,8 @@ class ScenarioNetSource:
         return [u for u in pickles if Path(u).name not in INDEX_FILES]
 
     def settings(self) -> dict:
-        return {"window_stride": self.window_stride, "sizes": self.budget.as_dict()}
+        return {"window_stride": self.window_stride, "orient_edges": self.orient_edges,
+                "sizes": self.budget.as_dict()}
 
     def read_unit(self, unit: str) -> Iterator[UnitItem]:
         desc = load_pickle(unit)  # InputError for an unreadable, refused or oversized file
@@ -105,7 +107,8 @@ class ScenarioNetSource:
             raise InputError(f"{unit}: not a ScenarioNet scenario description (a dict with a 'tracks' dict)")
         ref = scenario_name(desc, Path(unit).stem)
         try:
-            for item in description_windows(desc, self.budget, self.window_stride, default_id=ref):
+            for item in description_windows(desc, self.budget, self.window_stride, default_id=ref,
+                                            orient_edges=self.orient_edges):
                 yield Failure(unit, ref, one_line(item)) if isinstance(item, Exception) else item
         except Exception as error:  # noqa: BLE001 - fault isolation: a bad scenario never stops the run
             yield Failure(unit, ref, one_line(error))

@@ -108,8 +108,9 @@ def _point_arrays(containers: list, serialised: bool = False) -> list[np.ndarray
     return np.split(table, np.cumsum(counts)[:-1]) if containers else []
 
 
-def map_polylines(message) -> tuple[list[MapPolyline], list[LaneLinks]]:
-    """Map features -> polylines (road edges oriented, road on the left) and lane links."""
+def map_polylines(message, orient_edges: bool = True) -> tuple[list[MapPolyline], list[LaneLinks]]:
+    """Map features -> polylines (road edges oriented, road on the left, unless `orient_edges` is False) and lane
+    links."""
     features: list[tuple] = []  # (id, roadgraph type, points container, speed limit, closed)
     links: list[LaneLinks] = []
     for feature in message.map_features:
@@ -138,6 +139,8 @@ def map_polylines(message) -> tuple[list[MapPolyline], list[LaneLinks]]:
     points = _point_arrays([container for _, _, container, _, _ in features], proto.is_bulk(message))
     polylines = [MapPolyline(fid, rg_type, xyz, speed_limit=limit, closed=closed)
                  for (fid, rg_type, _, limit, closed), xyz in zip(features, points) if len(xyz)]
+    if not orient_edges:
+        return polylines, links
     return orient_road_edges(polylines, sch.ROAD_EDGE_TYPES, sch.LANE_TYPES), links
 
 
@@ -237,12 +240,12 @@ def _waymo_paths(message, sdc_paths: str, sizes: Sizes) -> dict | None:
     return waymo_path_arrays(paths, sizes.num_paths, sizes.num_points_per_path)
 
 
-def scenario_windows(message, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE,
-                     sdc_paths: str = SDC_PATHS_AUTO) -> Iterator[Scenario | ScenarioBuildError]:
+def scenario_windows(message, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE, sdc_paths: str = SDC_PATHS_AUTO,
+                     orient_edges: bool = True) -> Iterator[Scenario | ScenarioBuildError]:
     """Every 91-step window of one WOMD Scenario message, fitted to the budget. Windows that cannot be
     built are yielded as ScenarioBuildError (the caller records them as Failures). `sdc_paths` chooses
     who makes the SDC paths (see sdc_paths.py): Waymo's paths start at the log's own current step, so
-    they go to that window only; the others are left to the reconstruction."""
+    they go to that window only; the others are left to the reconstruction. `orient_edges`: see `WomdSource`."""
     scenario_id = message.scenario_id or "unnamed"
     num_steps = len(message.timestamps_seconds)
     current = message.current_time_index if message.HasField("current_time_index") else sizes.num_past
@@ -258,7 +261,7 @@ def scenario_windows(message, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE,
         return
     tracks = track_arrays(message)
     objects = _object_fields(message)
-    polylines, links = map_polylines(message)
+    polylines, links = map_polylines(message, orient_edges)
     roadgraph = polylines_to_roadgraph(polylines)
     lane_graph = lane_graph_arrays(links, sizes.num_lane_links)
     seconds = np.asarray(message.timestamps_seconds, np.float64)
