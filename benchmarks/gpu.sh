@@ -7,7 +7,7 @@
 # Install: the lent machines reach no package index, but their image holds Python 3.12 with JAX (CUDA), Flax, Optax,
 # Orbax, NumPy, SciPy, Matplotlib...; what it lacks travels as wheels in .whl/ (git-ignored; `carry: [".whl"]`):
 #   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
-#     --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 -d .whl shapely google-crc32c tensorboardX
+#     --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 -d .whl shapely google-crc32c tensorboardX orjson
 # With no .whl/ it installs from the network instead (`pip install -e .[sim] jax[cuda12]`).
 # Usage: bash benchmarks/gpu.sh [LEARN_MINUTES] [STAGES]   (default 0.5, "rows bench training learn")
 #   STAGES, any of: rows (self-play throughput), bench (simulator), training (SAC / PPO throughput),

@@ -16,6 +16,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Protocol, Union
 
+import orjson
+
 from scenariomax.errors import InputError  # its former home: importers of it from here keep working
 
 
@@ -73,6 +75,13 @@ def expand_inputs(src: str, pattern: str, description: str) -> list[str]:
 def parse_json(data: bytes) -> object:
     """UTF-8 JSON bytes -> the parsed document. ValueError with a one-line reason (no file name: the caller
     adds it) when the bytes are not UTF-8 or not JSON."""
+    # orjson: half the standard parser's time on GPUDrive's 2 MB maps (~15 ms a scenario), the same document but for
+    # integer literals beyond 64 bits, which it reads as floats (no reader accepts such an id or coordinate anyway)
+    try:
+        return orjson.loads(data)
+    except orjson.JSONDecodeError:
+        pass  # NaN / Infinity literals (Python's json.dump writes them), lone surrogates, or an error: the standard
+        # parser reads what it accepts and words the error
     try:
         return json.loads(data.decode("utf-8"))
     except UnicodeDecodeError as error:
