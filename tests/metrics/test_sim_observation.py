@@ -81,6 +81,18 @@ def test_features_rotate_into_the_sdc_frame(index):
     np.testing.assert_allclose(obs.objects[0, -1, 4:6], [1.0, 0.0], atol=1e-5)
 
 
+def test_sdc_history_hides_the_older_steps_of_the_sdc_only(index):
+    full = OBSERVE(index, obs_inputs(), ObservationConfig())
+    now_only = OBSERVE(index, obs_inputs(), ObservationConfig(sdc_history=1))
+    assert np.asarray(now_only.sdc_valid).tolist() == [False] * (K - 1) + [True]
+    assert np.all(np.asarray(now_only.sdc[:-1]) == 0)
+    np.testing.assert_array_equal(now_only.sdc[-1], full.sdc[-1])  # now: speed and heading still seen
+    np.testing.assert_array_equal(now_only.objects, full.objects)  # the others keep their history
+    np.testing.assert_array_equal(now_only.objects_valid, full.objects_valid)
+    with pytest.raises(ValueError, match="sdc_history"):
+        ObservationConfig(sdc_history=K + 1)
+
+
 def test_roadgraph_points_lie_in_the_box_ahead(index):
     config = ObservationConfig()
     obs = OBSERVE(index, obs_inputs(), config)

@@ -264,9 +264,12 @@ def observe(map_index: MapIndex, inputs: ObservationInputs, config: ObservationC
     objects, objects_valid = object_features(inputs, indices, index_valid, config)
     origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
     sdc = _heading_features(inputs.sdc_xy, inputs.sdc_vel, inputs.sdc_yaw, origin, origin_yaw, config)
+    sdc_valid = inputs.sdc_valid
+    if config.sdc_history is not None:  # the older steps hidden, as if never recorded
+        sdc_valid = sdc_valid & (jnp.arange(sdc_valid.shape[0]) >= sdc_valid.shape[0] - config.sdc_history)
     roadgraph, roadgraph_valid = roadgraph_features(map_index, origin, origin_yaw, config)
     lights, lights_valid = light_features(inputs, config)
-    return Observation(sdc=jnp.where(inputs.sdc_valid[:, None], sdc, 0.0), sdc_valid=inputs.sdc_valid,
+    return Observation(sdc=jnp.where(sdc_valid[:, None], sdc, 0.0), sdc_valid=sdc_valid,
                        objects=objects, objects_valid=objects_valid, roadgraph=roadgraph,
                        roadgraph_valid=roadgraph_valid, lights=lights, lights_valid=lights_valid,
                        path_targets=targets, path_targets_valid=targets_valid)
