@@ -518,6 +518,9 @@ def _check_resumable(previous: dict, source: Source, settings: ConvertSettings, 
                      out: Path) -> None:
     path = out / MANIFEST
     before = {"compression": "none", **(previous.get("settings") or {})}  # manifests older than compression
+    source_before = before.get("source")
+    if isinstance(source_before, dict) and previous.get("source_dataset") in ("womd", "scenarionet"):
+        before["source"] = {"orient_edges": True, **source_before}  # manifests older than orient_edges
     if before != _run_settings(source, settings):
         raise ConversionError(f"{path}: settings differ from that conversion's; rerun with the same options, "
                               "or use --overwrite or a new --out")

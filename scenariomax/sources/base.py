@@ -16,7 +16,10 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Protocol, Union
 
-import orjson
+try:  # a declared dependency; an environment not reinstalled since it came still converts, slower
+    import orjson
+except ImportError:  # pragma: no cover
+    orjson = None
 
 from scenariomax.errors import InputError  # its former home: importers of it from here keep working
 
@@ -76,12 +79,14 @@ def parse_json(data: bytes) -> object:
     """UTF-8 JSON bytes -> the parsed document. ValueError with a one-line reason (no file name: the caller
     adds it) when the bytes are not UTF-8 or not JSON."""
     # orjson: half the standard parser's time on GPUDrive's 2 MB maps (~15 ms a scenario), the same document but for
-    # integer literals beyond 64 bits, which it reads as floats (no reader accepts such an id or coordinate anyway)
-    try:
-        return orjson.loads(data)
-    except orjson.JSONDecodeError:
-        pass  # NaN / Infinity literals (Python's json.dump writes them), lone surrogates, or an error: the standard
-        # parser reads what it accepts and words the error
+    # integer literals beyond 64 bits, which it reads as floats (an id or light state that large is then refused as
+    # "a number" where an integer belongs; no real file has one)
+    if orjson is not None:
+        try:
+            return orjson.loads(data)
+        except orjson.JSONDecodeError:
+            pass  # NaN / Infinity literals (Python's json.dump writes them), lone surrogates, or an error: the
+            # standard parser reads what it accepts and words the error
     try:
         return json.loads(data.decode("utf-8"))
     except UnicodeDecodeError as error:

@@ -89,8 +89,9 @@ def test_sdc_history_hides_the_older_steps_of_the_sdc_only(index):
     np.testing.assert_array_equal(now_only.sdc[-1], full.sdc[-1])  # now: speed and heading still seen
     np.testing.assert_array_equal(now_only.objects, full.objects)  # the others keep their history
     np.testing.assert_array_equal(now_only.objects_valid, full.objects_valid)
+    np.testing.assert_array_equal(OBSERVE(index, obs_inputs(), ObservationConfig(sdc_history=K + 3)).sdc, full.sdc)
     with pytest.raises(ValueError, match="sdc_history"):
-        ObservationConfig(sdc_history=K + 1)
+        ObservationConfig(sdc_history=0)
 
 
 def test_roadgraph_points_lie_in_the_box_ahead(index):
