@@ -88,9 +88,7 @@ def bench_source(dataset: str, src: Path, min_seconds: float = 6.0, min_passes: 
     sizes = Sizes()
     transform, _ = make_transform(True)
 
-    def one_pass(fn) -> int:
-        # as `scenariomax convert`: a source orients road edges only when no enrichment (which orients them) follows
-        source = make_source(dataset, src=str(src), sizes=sizes, orient_edges=fn is None)
+    def one_pass(source, fn) -> int:
         count = 0
         for unit in source.list_units():
             for item in source.read_unit(unit):
@@ -102,11 +100,13 @@ def bench_source(dataset: str, src: Path, min_seconds: float = 6.0, min_passes: 
 
     results = {}
     for label, fn in (("convert", None), ("convert+enrich", transform)):
-        one_pass(fn)  # warm-up: imports, caches
+        # as `scenariomax convert`: a source orients road edges only when no enrichment (which orients them) follows
+        source = make_source(dataset, src=str(src), sizes=sizes, orient_edges=fn is None)
+        one_pass(source, fn)  # warm-up: imports, caches
         cpu, wall, stop = [], [], time.perf_counter() + min_seconds
         while len(cpu) < min_passes or time.perf_counter() < stop:
             cpu_start, wall_start = time.process_time(), time.perf_counter()
-            count = one_pass(fn)
+            count = one_pass(source, fn)
             cpu.append(_rate(count, time.process_time() - cpu_start))
             wall.append(_rate(count, time.perf_counter() - wall_start))
         results[f"{label}_per_cpu_s"] = _median(cpu)

@@ -513,9 +513,7 @@ def map_polylines(features: Mapping, ids: Mapping, speed_limits: bool = True, or
     if total > MAX_MAP_POINTS:
         raise ScenarioBuildError(f"map of {total} roadgraph points at {DEFAULT_SPACING_M:g} m is more than the "
                                  f"{MAX_MAP_POINTS} allowed")
-    if not orient_edges:
-        return polylines, links
-    return orient_road_edges(polylines, sch.ROAD_EDGE_TYPES, sch.LANE_TYPES), links
+    return (orient_road_edges(polylines) if orient_edges else polylines), links
 
 
 # --- traffic lights --------------------------------------------------------------------------------

@@ -139,9 +139,7 @@ def map_polylines(message, orient_edges: bool = True) -> tuple[list[MapPolyline]
     points = _point_arrays([container for _, _, container, _, _ in features], proto.is_bulk(message))
     polylines = [MapPolyline(fid, rg_type, xyz, speed_limit=limit, closed=closed)
                  for (fid, rg_type, _, limit, closed), xyz in zip(features, points) if len(xyz)]
-    if not orient_edges:
-        return polylines, links
-    return orient_road_edges(polylines, sch.ROAD_EDGE_TYPES, sch.LANE_TYPES), links
+    return (orient_road_edges(polylines) if orient_edges else polylines), links
 
 
 # --- traffic lights ------------------------------------------------------------------------------
