@@ -37,6 +37,10 @@ class DataConfig:
     # the environment variable VMAX_MAP_INDEX_CACHE=0 also turns it off)
     map_index_cache: bool = True
     map_index_cache_max_gb: float = 32.0  # bound of that folder (an entry: the index's bytes x scenarios)
+    # share of the scenarios read as if recorded without traffic-light states (nuScenes and AV2 have none, and 9 of
+    # the 10 GPUDrive JSON scenes here): no light reaches the observation, the planners or the metrics. A fixed
+    # draw per scenario id (vmax_sim.data.convert.lights_hidden). Training sets it (`data.hide_lights`)
+    hide_lights: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("batch_size", "num_objects", "num_roadgraph_points", "num_paths", "num_points_per_path",
@@ -45,5 +49,7 @@ class DataConfig:
                 raise ValueError(f"DataConfig.{name} must be at least 1, got {getattr(self, name)}")
         if self.prefetch < 0 or self.shuffle_buffer < 0 or self.num_workers < 0:
             raise ValueError("DataConfig.prefetch, shuffle_buffer and num_workers must not be negative")
+        if not 0.0 <= self.hide_lights <= 1.0:
+            raise ValueError(f"DataConfig.hide_lights must be in [0, 1], got {self.hide_lights}")
         if not self.map_index_cache_max_gb > 0:
             raise ValueError(f"DataConfig.map_index_cache_max_gb must be positive, got {self.map_index_cache_max_gb}")

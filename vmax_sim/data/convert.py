@@ -5,6 +5,7 @@ All padding and cropping happens here so every state from one `DataConfig` has t
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Iterable, Sequence
 
 import jax
@@ -106,8 +107,15 @@ def _roadgraph(scenario: Scenario, num_points: int) -> RoadgraphPoints:
     )
 
 
-def _traffic_lights(scenario: Scenario, num_lights: int) -> TrafficLights:
-    keep = np.flatnonzero(scenario.tl_valid.any(axis=1))[:num_lights]  # lights seen at least once
+def lights_hidden(scenario_id: str, share: float) -> bool:
+    """Whether `DataConfig.hide_lights` hides this scenario's lights: a fixed draw per scenario id (crc32, the same
+    in every process and run), so a scenario is lit or unlit every time it is read, as a recording is."""
+    return share > 0 and zlib.crc32(scenario_id.encode()) / 2**32 < share
+
+
+def _traffic_lights(scenario: Scenario, num_lights: int, hidden: bool = False) -> TrafficLights:
+    """The first `num_lights` lights seen at least once; none (all slots invalid) when `hidden`."""
+    keep = np.flatnonzero(scenario.tl_valid.any(axis=1))[:0 if hidden else num_lights]
     valid = scenario.tl_valid[keep]
 
     def take(values: np.ndarray, dtype, fill) -> np.ndarray:
@@ -224,7 +232,8 @@ def scenario_to_numpy_state(scenario: Scenario, config: DataConfig) -> Simulator
         sim_trajectory=log,
         object_metadata=_metadata(scenario, slots, config.num_objects),
         roadgraph_points=roadgraph,
-        log_traffic_light=_traffic_lights(scenario, config.max_num_lights),
+        log_traffic_light=_traffic_lights(scenario, config.max_num_lights,
+                                          lights_hidden(scenario.scenario_id, config.hide_lights)),
         sdc_paths=_paths(scenario, config.num_paths, config.num_points_per_path),
         map_index=build_map_index_for(roadgraph, sdc_xy, config) if config.include_map_index else None,
         timestep=np.asarray(scenario.current_time_index, np.int32),

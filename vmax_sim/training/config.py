@@ -46,6 +46,14 @@ class TrainDataConfig:
     num_points_per_path: int = 300
     max_num_lights: int = 16
     shuffle_buffer: int = 256
+    # share of the *training* scenarios whose traffic-light states are hidden from the learner, its teacher and
+    # its metrics (22 of the 32 real scenes here have none; every synthetic signal has them): a fixed draw per
+    # scenario (vmax_sim.data.DataConfig.hide_lights). Evaluation always shows the lights a record has
+    hide_lights: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.hide_lights <= 1.0:
+            raise ValueError(f"data.hide_lights must be in [0, 1], got {self.hide_lights}")
 
 
 TRAFFIC_CHOICES = ("log", "idm")  # train.traffic: who drives the objects other than the SDC while training
