@@ -278,8 +278,8 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # every step of an hour: 2.9 GB, which every checkpoint carries, so checkpoints (and evaluations) come every 100k env
 # steps (~8 min here), not every 20k. 1M env steps take ~80 minutes on 2 CPU cores: `train.max_wall_minutes=60` is
 # the hour. Half the training scenes are read without their traffic-light states, as most real recordings
-# come (one hour, seed 0: real-scene V-Max 0.839 -> 0.893 averaged over the checkpoints from 300k, the ensemble's
-# 0.857 -> 0.912; held-out synthetic ensemble 94 / 0.936 -> 99 / 0.970; docs/learning.md, session 36).
+# come (two hours, seeds 0 and 1: held-out synthetic ensembles 94-96 -> 98-99%, V-Max 0.933-0.936 -> 0.954-0.970;
+# real scenes level per checkpoint, V-Max 0.840 -> 0.867; docs/learning.md, session 36).
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm", "algo.student_drive=0.5", "algo.student_mix=episode",
     "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=600000",
