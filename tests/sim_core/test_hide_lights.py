@@ -11,6 +11,7 @@ from conftest import make_scenario, small_config
 
 from vmax_sim.data import DataConfig, scenario_to_numpy_state
 from vmax_sim.data.convert import lights_hidden
+from vmax_sim.env.metrics_adapter import observation_inputs
 from vmax_sim.training import apply_overrides, preset_config
 from vmax_sim.training.run import data_config, train_data_config
 
@@ -51,3 +52,34 @@ def test_a_share_outside_zero_to_one_is_refused(value):
         apply_overrides(preset_config(), [f"data.hide_lights={value}"])
     with pytest.raises(ValueError, match="hide_lights must be in"):
         DataConfig(hide_lights=float(value))
+
+
+def _student_only(share: float) -> DataConfig:
+    return dataclasses.replace(small_config(), hide_lights=share, hide_lights_from="student")
+
+
+def test_lights_hidden_from_the_student_stay_in_the_state_and_leave_its_observation():
+    scenario = make_scenario(0)
+    shown = scenario_to_numpy_state(scenario, small_config())
+    hidden = scenario_to_numpy_state(scenario, _student_only(1.0))
+    # the teacher, the traffic and the metrics read the same lights as in a lit scene
+    assert all(np.array_equal(a, b) for a, b in zip(jax.tree.leaves(shown.log_traffic_light),
+                                                    jax.tree.leaves(hidden.log_traffic_light)))
+    assert bool(hidden.lights_hidden) and shown.lights_hidden is None
+    seen = observation_inputs(jax.device_put(shown)).light_valid
+    assert np.asarray(seen).any()  # the lit scene shows its light
+    assert not np.asarray(observation_inputs(jax.device_put(hidden)).light_valid).any()
+
+
+def test_a_scene_the_draw_leaves_lit_shows_its_lights_to_the_student():
+    lit = scenario_to_numpy_state(make_scenario(0), _student_only(1e-9))  # a share no crc32 draw falls under
+    assert lit.lights_hidden is not None and not bool(lit.lights_hidden)  # every state of the stream: one pytree
+    assert np.asarray(observation_inputs(jax.device_put(lit)).light_valid).any()
+
+
+def test_whom_the_lights_are_hidden_from_is_a_training_data_setting():
+    config = apply_overrides(preset_config(), ["data.hide_lights_from=student"])
+    assert train_data_config(config, "shards", seed=0).hide_lights_from == "student"
+    assert data_config(config, "held_out").hide_lights == 0.0
+    with pytest.raises(ValueError, match="hide_lights_from must be one of"):
+        apply_overrides(preset_config(), ["data.hide_lights_from=teacher"])

@@ -13,6 +13,9 @@ def cache_dir() -> Path:
     return Path(os.environ.get("VMAX_CACHE_DIR", Path.home() / ".cache" / "vmax_sim"))
 
 
+HIDE_LIGHTS_FROM = ("all", "student")  # DataConfig.hide_lights_from
+
+
 @dataclasses.dataclass(frozen=True)
 class DataConfig:
     path: str = ""  # shard directory, file or glob
@@ -38,9 +41,13 @@ class DataConfig:
     map_index_cache: bool = True
     map_index_cache_max_gb: float = 32.0  # bound of that folder (an entry: the index's bytes x scenarios)
     # share of the scenarios read as if recorded without traffic-light states (nuScenes and AV2 have none, and 9 of
-    # the 10 GPUDrive JSON scenes here): no light reaches the observation, the planners or the metrics. A fixed
-    # draw per scenario id (vmax_sim.data.convert.lights_hidden). Training sets it (`data.hide_lights`)
+    # the 10 GPUDrive JSON scenes here). A fixed draw per scenario id (vmax_sim.data.convert.lights_hidden).
+    # Training sets it (`data.hide_lights`)
     hide_lights: float = 0.0
+    # from whom: "all" (no light reaches the observation, the planners or the metrics: an unlit recording) or
+    # "student" (only the learner's observation loses them, SimulatorState.lights_hidden; its teacher, the traffic and
+    # the metrics still read the signal, as the recorded driver of an unlit recording saw it)
+    hide_lights_from: str = "all"
 
     def __post_init__(self) -> None:
         for name in ("batch_size", "num_objects", "num_roadgraph_points", "num_paths", "num_points_per_path",
@@ -51,5 +58,8 @@ class DataConfig:
             raise ValueError("DataConfig.prefetch, shuffle_buffer and num_workers must not be negative")
         if not 0.0 <= self.hide_lights <= 1.0:
             raise ValueError(f"DataConfig.hide_lights must be in [0, 1], got {self.hide_lights}")
+        if self.hide_lights_from not in HIDE_LIGHTS_FROM:
+            raise ValueError(f"DataConfig.hide_lights_from must be one of {HIDE_LIGHTS_FROM}, "
+                             f"got {self.hide_lights_from!r}")
         if not self.map_index_cache_max_gb > 0:
             raise ValueError(f"DataConfig.map_index_cache_max_gb must be positive, got {self.map_index_cache_max_gb}")

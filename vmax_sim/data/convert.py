@@ -227,18 +227,20 @@ def scenario_to_numpy_state(scenario: Scenario, config: DataConfig) -> Simulator
     roadgraph = _roadgraph(scenario, config.num_roadgraph_points)
     now = scenario.current_time_index
     sdc_xy = np.array([scenario.x[sdc, now], scenario.y[sdc, now]], np.float64)
+    hidden = lights_hidden(scenario.scenario_id, config.hide_lights)
+    from_student_only = config.hide_lights > 0 and config.hide_lights_from == "student"
     return SimulatorState(
         log_trajectory=log,
         sim_trajectory=log,
         object_metadata=_metadata(scenario, slots, config.num_objects),
         roadgraph_points=roadgraph,
-        log_traffic_light=_traffic_lights(scenario, config.max_num_lights,
-                                          lights_hidden(scenario.scenario_id, config.hide_lights)),
+        log_traffic_light=_traffic_lights(scenario, config.max_num_lights, hidden and not from_student_only),
         sdc_paths=_paths(scenario, config.num_paths, config.num_points_per_path),
         map_index=build_map_index_for(roadgraph, sdc_xy, config) if config.include_map_index else None,
         timestep=np.asarray(scenario.current_time_index, np.int32),
         agent_paths=(_agent_paths(scenario, slots, config.num_objects, config.num_points_per_agent_path)
                      if config.include_agent_paths else None),
+        lights_hidden=np.asarray(hidden) if from_student_only else None,
     )
 
 

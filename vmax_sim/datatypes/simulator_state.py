@@ -34,6 +34,9 @@ class SimulatorState:
     # cache line per object row (the trajectories are time-minor); the step and its metrics made two such
     # reads, ~13% of the full step's time at batch 128. None: sliced on demand (states from the loader).
     current_sim: Any = None
+    # (...) bool: the learner's observation shows none of this scenario's lights, which its teacher, the traffic and
+    # the metrics still read (DataConfig.hide_lights_from="student"). None: shown
+    lights_hidden: Any = None
 
     @property
     def batch_shape(self) -> tuple[int, ...]:

@@ -134,6 +134,7 @@ def observation_inputs(state: SimulatorState, num_history: int = 5) -> Observati
     now = _now(state)
     lights = jax.tree.map(lambda a: jax.lax.dynamic_index_in_dim(a, t, axis=-1, keepdims=False),
                           state.log_traffic_light)
+    light_valid = lights.valid if state.lights_hidden is None else lights.valid & ~state.lights_hidden
     paths = state.sdc_paths
     xy = jnp.stack([window.x, window.y], axis=-1)
     vel = jnp.stack([window.vel_x, window.vel_y], axis=-1)
@@ -143,7 +144,7 @@ def observation_inputs(state: SimulatorState, num_history: int = 5) -> Observati
         object_size=jnp.stack([now.length, now.width], axis=-1),
         object_type=state.object_metadata.object_types,
         object_valid=window.valid & ~state.object_metadata.is_sdc[:, None],
-        light_xy=jnp.stack([lights.x, lights.y], axis=-1), light_state=lights.state, light_valid=lights.valid,
+        light_xy=jnp.stack([lights.x, lights.y], axis=-1), light_state=lights.state, light_valid=light_valid,
         path_xy=paths.xy, path_valid=paths.valid, path_arc=paths.arc_length, path_on_route=paths.on_route,
     )
 

@@ -21,6 +21,7 @@ from typing import Any
 
 from scenariomax import SyntheticKnobs
 from vmax_sim.agents import ALGORITHMS, get_config
+from vmax_sim.data.config import HIDE_LIGHTS_FROM
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.selfplay import SelfPlayConfig
 from vmax_sim.networks import ENCODER_NAMES, EncoderConfig
@@ -50,10 +51,14 @@ class TrainDataConfig:
     # its metrics (22 of the 32 real scenes here have none; every synthetic signal has them): a fixed draw per
     # scenario (vmax_sim.data.DataConfig.hide_lights). Evaluation always shows the lights a record has
     hide_lights: float = 0.0
+    # from whom: "all" (an unlit recording) or "student" (the teacher still sees them; DataConfig.hide_lights_from)
+    hide_lights_from: str = "all"
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.hide_lights <= 1.0:
             raise ValueError(f"data.hide_lights must be in [0, 1], got {self.hide_lights}")
+        if self.hide_lights_from not in HIDE_LIGHTS_FROM:
+            raise ValueError(f"data.hide_lights_from must be one of {HIDE_LIGHTS_FROM}, got {self.hide_lights_from!r}")
 
 
 TRAFFIC_CHOICES = ("log", "idm")  # train.traffic: who drives the objects other than the SDC while training
