@@ -47,9 +47,9 @@ class TrainDataConfig:
     num_points_per_path: int = 300
     max_num_lights: int = 16
     shuffle_buffer: int = 256
-    # share of the *training* scenarios whose traffic-light states are hidden (from whom: hide_lights_from) (22 of
-    # the 32 real scenes here have none; every synthetic signal has them): a fixed draw per
-    # scenario (vmax_sim.data.DataConfig.hide_lights). Evaluation always shows the lights a record has
+    # share of the *training* scenarios whose traffic-light states are hidden (22 of the 32 real scenes here have
+    # none; every synthetic signal has them): a fixed draw per scenario (vmax_sim.data.DataConfig.hide_lights).
+    # Evaluation always shows the lights a record has
     hide_lights: float = 0.0
     # from whom: "all" (an unlit recording) or "student" (the teacher still sees them; DataConfig.hide_lights_from)
     hide_lights_from: str = "all"
