@@ -43,6 +43,7 @@ def gallery(shards, tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.slow  # with the next two, their gallery (~15 s) on 2 cores: kept out of the 10-minute default suite
 def test_each_failed_episode_gets_a_gif_and_a_png_of_the_failing_step(gallery):
     files = sorted(p.name for p in (gallery / "constant").iterdir())
     assert files == ["000-brake.gif", "000-brake.png", "001-red.gif", "001-red.png", "002-cruise.gif", "002-cruise.png"]
@@ -59,6 +60,7 @@ def test_each_failed_episode_gets_a_gif_and_a_png_of_the_failing_step(gallery):
     assert red_pixels(png) > 100 and red_pixels(gif) < red_pixels(png) / 10
 
 
+@pytest.mark.slow  # shares the gallery above on 2 cores: kept out of the 10-minute default suite
 def test_index_lists_the_episodes_with_their_metrics_and_links_existing_images(gallery):
     page = (gallery / "index.html").read_text()
     links = IMAGE_LINK.findall(page)
@@ -70,6 +72,7 @@ def test_index_lists_the_episodes_with_their_metrics_and_links_existing_images(g
         assert text in page, text
 
 
+@pytest.mark.slow  # shares the gallery above on 2 cores: kept out of the 10-minute default suite
 @pytest.mark.skipif(shutil.which("chromium") is None, reason="chromium is not installed (.ci/run installs it)")
 def test_index_renders_in_a_headless_browser(gallery, tmp_path):
     def dump(index: Path) -> str:

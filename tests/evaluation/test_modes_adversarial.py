@@ -62,6 +62,7 @@ def assert_within_bounds(log, slot: int, config: AdversaryConfig):
     assert np.abs(np.diff(curvature))[both].max() <= config.max_curvature_rate + 1e-3  # no swinging turns
 
 
+@pytest.mark.slow  # ~11 s on 2 cores: kept out of the 10-minute default suite
 def test_a_car_in_the_next_lane_is_replanned_into_a_feasible_cut_in():
     state, new, info = planned(side_by_side())
     assert info["adversary_found"] == 1.0 and info["adversary_slot"] == 1.0
@@ -74,6 +75,7 @@ def test_a_car_in_the_next_lane_is_replanned_into_a_feasible_cut_in():
     assert_within_bounds(log, 1, CONFIG)
 
 
+@pytest.mark.slow  # ~14 s on 2 cores: kept out of the 10-minute default suite
 def test_a_follower_is_never_turned_into_a_rear_end_attack():
     # top speed 1.05 x its logged 10 m/s: it cannot come alongside within the episode, only hit the rear
     _, new, info = planned(follower(), dataclasses.replace(CONFIG, speed_factor=1.05, min_max_speed=1.0))

@@ -44,6 +44,7 @@ def test_step_inputs_hold_the_sdc_history_and_exclude_its_slot():
     assert obs.object_valid[0].tolist() == [False] * 5 and obs.object_valid[1].all()
 
 
+@pytest.mark.slow  # ~11 s on 2 cores: kept out of the 10-minute default suite
 def test_termination_predicates_match_hand_placed_boxes():
     fns = termination_fns()
     state = make_environment(EnvConfig(max_num_objects=8)).reset(_state(braking_scenario()))

@@ -71,6 +71,7 @@ def test_log_ending_at_the_start_step_judges_nothing():
     assert episode["end_of_log"] == 1.0 and episode["accurate"] == 1.0 and episode["log_divergence"] == 0.0
 
 
+@pytest.mark.slow  # ~16 s on 2 cores: kept out of the 10-minute default suite
 def test_environment_truncates_at_the_end_of_the_sdc_log():
     env = make_environment(CONFIG)
     state = env.reset(_state(log_ending_at(12)))

@@ -53,6 +53,7 @@ def _rollout(policy: str, scenario, env_config: EnvConfig):
                        ObservationConfig())
 
 
+@pytest.mark.slow  # ~22 s on 2 cores: kept out of the 10-minute default suite
 def test_collision_termination_fires_at_the_hand_worked_step():
     # keeping 10 m/s from x = 10 m at step 10, the SDC's front (x + 2.25) passes the car's rear
     # (37.75 m) when x > 35.5 m: first at step 36, the 26th policy step (index 25).

@@ -79,6 +79,7 @@ def test_forecasts_move_objects_at_constant_velocity():
     assert np.asarray(stopped.vel[3:, 0]).tolist() == [[0.0, 0.0], [0.0, 0.0]]
 
 
+@pytest.mark.slow  # ~22 s on 2 cores: kept out of the 10-minute default suite
 def test_pdm_stops_where_the_constant_velocity_policy_crashes():
     constant, _ = episode("constant", braking_scenario())
     assert float(constant.episode["overlap"]) == 1.0 and float(constant.episode["at_fault_collision"]) == 1.0

@@ -18,6 +18,7 @@ def runs(policy_shards):
     return compare_policies(["expert", "idm"], str(policy_shards), batch_size=2, num_objects=8, progress=False)
 
 
+@pytest.mark.slow  # with the next test, their runs (~20 s) on 2 cores: kept out of the 10-minute default suite
 def test_comparison_table_has_the_benchmark_rows_and_one_column_per_policy(runs):
     assert [run.name for run in runs] == ["expert", "idm"]
     assert runs[0].result.scenario_ids == ("cruise", "brake", "lead", "red")
@@ -33,6 +34,7 @@ def test_comparison_table_has_the_benchmark_rows_and_one_column_per_policy(runs)
     assert rows[-2] == ["episodes", "4", "4"]
 
 
+@pytest.mark.slow  # shares the runs above on 2 cores: kept out of the 10-minute default suite
 def test_report_files(runs, tmp_path):
     paths = write_report(tmp_path / "report", runs)
     assert sorted(p.name for p in paths) == ["episodes-expert.csv", "episodes-idm.csv", "table.csv", "table.md"]
@@ -66,6 +68,7 @@ def test_run_directories_go_to_the_run_evaluator_the_caller_passes(tmp_path):
     assert calls == [(str(run), None, 2)] and column.name == "sac-mlp@run"
 
 
+@pytest.mark.slow  # ~38 s on 2 cores: kept out of the 10-minute default suite
 def test_cli_compares_two_policies_and_writes_the_report(policy_shards, tmp_path):
     out = tmp_path / "cmp"
     args = ["evaluate", "--policy", "expert, idm", "--data", str(policy_shards), "--num-objects", "8",

@@ -52,7 +52,8 @@ def example() -> Transition:
 
 
 @pytest.mark.parametrize("capacity, num_blocks", [
-    (10, 1), pytest.param(12, 1, marks=pytest.mark.slow), (16, 2)])  # 4-6 s each: two in the default suite
+    pytest.param(10, 1, marks=pytest.mark.slow), pytest.param(12, 1, marks=pytest.mark.slow),
+    (16, 2)])  # 5-10 s each on 2 cores: one in the default suite
 def test_samples_equal_a_buffer_of_whole_transitions_across_episode_ends(capacity, num_blocks):
     whole = buffer_init(example(), capacity, jnp.float16, num_blocks)
     # a ring of last observations for every row: the toy's episodes are far shorter than the default sizing

@@ -60,6 +60,7 @@ def test_agents_are_the_sdc_then_the_controllable_ones_and_empty_slots_are_maske
     np.testing.assert_allclose(state.goal_xy[0, 1], [90.0, 0.0])  # the agent's last logged position
 
 
+@pytest.mark.slow  # with the next test, its rollout (~35 s) on 2 cores: kept out of the 10-minute default suite
 def test_an_agent_that_crashes_ends_its_episode_and_leaves_the_scene(removed):
     _, out, xs = removed
     agent = out.terminated[:, 1]
@@ -73,6 +74,7 @@ def test_an_agent_that_crashes_ends_its_episode_and_leaves_the_scene(removed):
     assert front.max() > PARKED_X - 2.25  # it really reached the parked car
 
 
+@pytest.mark.slow  # shares the rollout above on 2 cores: kept out of the 10-minute default suite
 def test_the_sdc_reaches_its_goal_and_the_scene_restarts(removed):
     _, out, _ = removed
     goal_step = int(np.argmax(out.episode_flags["goal_reached"][:, 0]))

@@ -88,6 +88,7 @@ def _draw_ids(spec: str, count: int, seed: int = 0) -> list[str]:
     return [scenario.scenario_id for scenario, _ in itertools.islice(stream_items(config), count)]
 
 
+@pytest.mark.slow  # ~13 s on 2 cores: kept out of the 10-minute default suite
 def test_a_weighted_mixture_draws_its_sources_in_proportion(synthetic_shards, second_shards):
     draws = 600
     ids = _draw_ids(f"{synthetic_shards}:3,{second_shards}:1", draws)

@@ -53,6 +53,7 @@ def test_a_pdm_teacher_drives_off_where_the_logged_driver_waited():
     np.testing.assert_allclose(labels[0], np.clip(np.asarray(expected), -1, 1), atol=1e-5)
 
 
+@pytest.mark.slow  # ~11 s on 2 cores: kept out of the 10-minute default suite
 def test_the_log_teacher_keeps_the_logged_driver_waiting():
     _, _, labels, xs, _ = driven_episode("log", steps=20)
     assert abs(xs[-1]) < 0.5

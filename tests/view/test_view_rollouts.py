@@ -126,6 +126,7 @@ def failed_by_constant(evaluation: Path) -> list[str]:
     return [row.split(",")[0] for row in rows[1:] if float(row.split(",")[keys.index("accurate")]) < 0.5]
 
 
+@pytest.mark.slow  # its evaluation (~17 s) on 2 cores: kept out of the 10-minute default suite
 def test_evaluate_view_writes_the_failed_episodes_first_with_every_policy(evaluation):
     by_id = scenes(evaluation / "rollouts.html")
     assert list(by_id) == ["brake"]  # --view-max 1: the first failed episode, not the first scenario
