@@ -28,6 +28,8 @@ from tests.policies.scenes import (
 from vmax_sim.env import EnvConfig, make_environment
 from vmax_sim.evaluation import POLICY_NAMES, evaluate, make_policy
 from vmax_sim.policies import IDMConfig, idm_acceleration, idm_action, idm_policy, pure_pursuit_curvature
+from vmax_sim.policies.idm import corridor_leader
+from vmax_sim.policies.route import Objects
 
 HALF_LENGTH = 2.25  # the hand-made vehicles are 4.5 m long
 
@@ -83,6 +85,32 @@ def test_idm_stops_behind_a_stopped_car():
     rear_of_car = CAR_AHEAD_X - HALF_LENGTH
     assert float(rollout.episode["overlap"]) == 0.0
     assert steps["speed"][-1] < 0.1 and rear_of_car - 4.0 < front[-1] < rear_of_car - 1.0  # ~ s0 = 2 m short
+
+
+def _objects_ahead(lateral, speed, arc) -> Objects:
+    """Cars 4.5 x 1.8 m at `arc` m along the path, `lateral` m to its left, driving `speed` m/s along it."""
+    n = len(lateral)
+    speed = jnp.asarray(speed, jnp.float32)
+    return Objects(boxes=jnp.zeros((n, 5)), vel=jnp.stack([speed, jnp.zeros(n)], axis=1),
+                   valid=jnp.ones(n, bool), arc=jnp.asarray(arc, jnp.float32),
+                   lateral=jnp.asarray(lateral, jnp.float32), half_along=jnp.full(n, HALF_LENGTH),
+                   half_across=jnp.full(n, 0.9), speed_along=speed, yaw_rate=jnp.zeros(n))
+
+
+def test_standing_clearance_passes_a_parked_car_beside_the_lane_but_not_one_in_it():
+    lane = IDMConfig().lane_half_width
+    beside = _objects_ahead([-2.3], [0.0], [20.0])  # a parked car whose side is 1.4 m from the path
+    gap, _ = corridor_leader(beside, 0.0, 0.0, HALF_LENGTH, lane)
+    assert float(gap) == pytest.approx(20.0 - 2 * HALF_LENGTH)  # the lane corridor queues behind it
+    passing = 0.9 + 0.2  # the car's half width + 0.2 m to spare
+    gap, _ = corridor_leader(beside, 0.0, 0.0, HALF_LENGTH, lane, passing, 0.3)
+    assert math.isinf(float(gap))  # passed
+    # a car driving there, or one at rest in the lane, still leads
+    for objects in (_objects_ahead([-2.3], [5.0], [20.0]), _objects_ahead([-2.3, 0.4], [0.0, 0.0], [15.0, 30.0])):
+        gap, _ = corridor_leader(objects, 0.0, 0.0, HALF_LENGTH, lane, passing, 0.3)
+        assert np.isfinite(float(gap))
+    assert float(corridor_leader(_objects_ahead([-2.3, 0.4], [0.0, 0.0], [15.0, 30.0]), 0.0, 0.0, HALF_LENGTH,
+                                 lane, passing, 0.3)[0]) == pytest.approx(30.0 - 2 * HALF_LENGTH)
 
 
 def test_idm_stops_at_a_red_light_and_drives_through_a_green_one():

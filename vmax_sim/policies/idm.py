@@ -59,6 +59,9 @@ class IDMConfig:
     delta: float = 4.0  # acceleration exponent
     max_decel: float = 6.0  # m/s^2, the hardest braking (the bicycle model's bound)
     lane_half_width: float = 1.75  # m; an object is in the corridor when |lateral| < this + its half width
+    # m; when set, an object at rest (< stop_speed) leads only when |lateral| < the car's half width + this + its
+    # half width, so a car parked beside the lane is passed with this much room (None: the lane corridor for all)
+    standing_clearance: float | None = None
     bend_lateral_accel: float = 2.0  # m/s^2 accepted in bends: v <= sqrt(this / curvature)
     bend_decel: float = 1.5  # m/s^2 used to slow down ahead of a bend
     bend_preview_s: float = 1.0  # s; the bend speed is read this far ahead (IDM lags a falling desired speed)
@@ -106,10 +109,16 @@ def bounded_acceleration(accel: jax.Array, speed: jax.Array, config: IDMConfig, 
 
 
 def corridor_leader(objects: Objects, ego_arc: jax.Array, ego_offset: jax.Array, ego_half_length: jax.Array,
-                    lane_half_width: float) -> tuple[jax.Array, jax.Array]:
+                    lane_half_width: float, standing_half_width: jax.Array | None = None,
+                    stop_speed: float = 0.0) -> tuple[jax.Array, jax.Array]:
     """Gap (bumper to bumper, along the path) and speed of the nearest object ahead in the corridor
-    around the path shifted `ego_offset` to the left. -> (), () (inf, 0 when there is none)."""
-    in_corridor = objects.valid & (jnp.abs(objects.lateral - ego_offset) < lane_half_width + objects.half_across)
+    around the path shifted `ego_offset` to the left. -> (), () (inf, 0 when there is none).
+    standing_half_width (): the corridor's half width for objects slower than stop_speed (None: lane_half_width)."""
+    half_width = lane_half_width
+    if standing_half_width is not None:
+        standing = jnp.hypot(objects.vel[:, 0], objects.vel[:, 1]) < stop_speed
+        half_width = jnp.where(standing, standing_half_width, lane_half_width)
+    in_corridor = objects.valid & (jnp.abs(objects.lateral - ego_offset) < half_width + objects.half_across)
     ahead = objects.arc > ego_arc
     gap = jnp.where(in_corridor & ahead, objects.arc - ego_arc - ego_half_length - objects.half_along, jnp.inf)
     k = jnp.argmin(gap)

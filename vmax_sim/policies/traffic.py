@@ -77,7 +77,9 @@ def idm_driver(env, config=None, speed: str = "log", follow_log: bool = True) ->
             top = logged_top_speed(view, first, last)[sdc_index(view)]
             desired = jnp.minimum(desired, jnp.maximum(top, 1.0))
         ego = scene.ego
-        gap, lead_speed = corridor_leader(scene.objects, scene.ego_arc, 0.0, 0.5 * ego.length, config.lane_half_width)
+        standing = None if config.standing_clearance is None else 0.5 * ego.width + config.standing_clearance
+        gap, lead_speed = corridor_leader(scene.objects, scene.ego_arc, 0.0, 0.5 * ego.length, config.lane_half_width,
+                                          standing, config.stop_speed)
         accel = idm_step_acceleration(scene, scene.ego_arc, ego.speed, desired, gap, lead_speed, config, config.dt)
         if follow_log:
             accel = jnp.minimum(accel, log_cap_acceleration(view, scene, config))
@@ -89,7 +91,15 @@ def idm_driver(env, config=None, speed: str = "log", follow_log: bool = True) ->
     return agent_fn
 
 
-def idm_traffic(env) -> AgentFn:
+# room `train.traffic=idm_pass` leaves beside a car at rest (a parked car reaching into the lane,
+# `data.synthetic.parked_reach`, is passed as the log passes it, with the generator's 0.3 m, not queued behind)
+TRAFFIC_STANDING_CLEARANCE_M = 0.2
+
+
+def idm_traffic(env, standing_clearance: float | None = None) -> AgentFn:
     """The IDM traffic of training (`train.traffic=idm`): the reactive evaluation's default agents, at most their
-    logged pace and never ahead of their logged position."""
-    return idm_driver(env, speed="log", follow_log=True)
+    logged pace and never ahead of their logged position; with `standing_clearance` (m, `idm_pass`) passing a car
+    at rest beside their lane with that much room (IDMConfig.standing_clearance)."""
+    from vmax_sim.policies.idm import IDMConfig
+
+    return idm_driver(env, IDMConfig(standing_clearance=standing_clearance), speed="log", follow_log=True)

@@ -61,7 +61,7 @@ class TrainDataConfig:
             raise ValueError(f"data.hide_lights_from must be one of {HIDE_LIGHTS_FROM}, got {self.hide_lights_from!r}")
 
 
-TRAFFIC_CHOICES = ("log", "idm")  # train.traffic: who drives the objects other than the SDC while training
+TRAFFIC_CHOICES = ("log", "idm", "idm_pass")  # train.traffic: who drives the objects other than the SDC while training
 TEACHER_CHOICES = ("log", "idm", "pdm", "pdm_state")  # train.teacher: whose actions label BC's (and BC+SAC's) steps
 
 
@@ -95,7 +95,9 @@ class LoopConfig:
     action_repeat: int | None = None
     # who drives the objects other than the SDC while training: "log" (they replay it) or "idm" (up to
     # traffic_agents controllable agents nearest the SDC follow their own paths with IDM, never ahead of their
-    # logged position: a follower brakes for a learner that brakes). Evaluation stays non-reactive.
+    # logged position: a follower brakes for a learner that brakes); "idm_pass": the same agents passing a car at
+    # rest beside their lane with 0.2 m to spare instead of queueing behind it (for data.synthetic.parked_reach
+    # and real kerbsides). Evaluation stays non-reactive.
     traffic: str = "log"
     traffic_agents: int = 8
     # whose action labels each step for the algorithms that imitate (bc, bc_sac): "log" (the log-following

@@ -42,7 +42,7 @@ from vmax_sim.env.learning import LearningEnv
 from vmax_sim.env.selfplay import SelfPlayEnv
 from vmax_sim.networks import make_encoder
 from vmax_sim.policies.teacher import idm_teacher, pdm_state_teacher, pdm_teacher
-from vmax_sim.policies.traffic import idm_traffic
+from vmax_sim.policies.traffic import TRAFFIC_STANDING_CLEARANCE_M, idm_traffic
 from vmax_sim.training import distributed
 from vmax_sim.training.best import SDC_SCORE, SELFPLAY_SCORE, BestCheckpoint
 from vmax_sim.training.checkpoint import CheckpointStore
@@ -128,7 +128,8 @@ def teacher_of(config: TrainConfig):
 
 
 # train.traffic -> LearningEnv.traffic (None: the log)
-TRAFFIC_DRIVERS = {"log": None, "idm": idm_traffic}
+TRAFFIC_DRIVERS = {"log": None, "idm": idm_traffic,
+                   "idm_pass": functools.partial(idm_traffic, standing_clearance=TRAFFIC_STANDING_CLEARANCE_M)}
 # train.teacher -> LearningEnv.teacher (None: the log-following action)
 TEACHERS = {"log": None, "idm": idm_teacher, "pdm": pdm_teacher, "pdm_state": pdm_state_teacher}
 

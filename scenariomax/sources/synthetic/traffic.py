@@ -387,6 +387,8 @@ def simulate(network: RoadNetwork, rng: np.random.Generator, num_steps: int = 91
              knobs: SyntheticKnobs | None = None) -> Traffic:
     """Runs warm-up + `num_steps` logged steps of traffic on the network."""
     knobs = knobs or DEFAULT_KNOBS
+    # the parked cars' reach is drawn from a stream of its own, so that every other draw is the knob-off scene's
+    reach_rng = np.random.Generator(rng.bit_generator.jumped()) if knobs.parked_reach[1] > 0 else None
     world = _World(network, rng, num_steps)
     urban = network.topology not in ("merge",)
     parked = _park(network, rng, knobs)
@@ -399,6 +401,8 @@ def simulate(network: RoadNetwork, rng: np.random.Generator, num_steps: int = 91
         for lane in entries:
             if rng.random() < inflow:
                 _spawn_at_entry(world, rng, lane, urban, knobs)
+    if reach_rng is not None:
+        parked = _reach_towards_lanes(parked, network, world, reach_rng, knobs.parked_reach)
     return _collect(world, parked)
 
 
@@ -414,6 +418,52 @@ def _park(network: RoadNetwork, rng: np.random.Generator, knobs: SyntheticKnobs 
         take = spots
     bodies = [ag.parked_body(rng) for _ in range(len(take))]
     return {"xy": take[:, :2].reshape(-1, 2), "yaw": take[:, 2].reshape(-1), "bodies": bodies}
+
+
+# room a parked car leaves between itself and every vehicle the log drives past it
+PARKED_CLEARANCE_M = 0.3
+
+
+def _reach_towards_lanes(parked: dict, network: RoadNetwork, world: _World, rng: np.random.Generator,
+                         reach_range: tuple[float, float]) -> dict:
+    """`parked` with each car moved a distance drawn from `reach_range` towards the nearest lane centre, cut so that
+    its box stays PARKED_CLEARANCE_M apart from every logged vehicle's box at every step (apart along the move,
+    or beside it, where the move changes nothing: two separating axes)."""
+    xy = parked["xy"]  # (k, 2)
+    if not len(xy) or not network.lanes:
+        return parked
+    wanted = rng.uniform(*reach_range, size=len(xy))  # (k,)
+    centres = np.concatenate([lane.xy for lane in network.lanes])  # (L, 2), ~1 m apart
+    offsets = centres[None] - xy[:, None, :]  # (k, L, 2)
+    nearest = offsets[np.arange(len(xy)), np.hypot(offsets[..., 0], offsets[..., 1]).argmin(axis=1)]  # (k, 2)
+    beside = np.stack([np.cos(parked["yaw"]), np.sin(parked["yaw"])], axis=1)  # (k, 2) unit, along the kerb
+    towards = np.stack([-beside[:, 1], beside[:, 0]], axis=1)  # (k, 2) unit, across the car: the move...
+    towards *= np.where(np.sum(towards * nearest, axis=1) < 0, -1.0, 1.0)[:, None]  # ...to the lane's side
+    logged = np.flatnonzero(world.log_valid.any(axis=1))
+    reach = wanted
+    if len(logged):
+        body = np.array([(b.length, b.width) for b in parked["bodies"]])  # (k, 2)
+        yaw = parked["yaw"]  # (k,)
+        mover_xy = np.stack([world.log["x"][logged], world.log["y"][logged]], axis=-1)[None]  # (1, M, T, 2)
+        mover_yaw = world.log["yaw"][logged][None]  # (1, M, T)
+        mover_body = np.stack([world.length[logged], world.width[logged]], axis=-1)[None, :, None]  # (1, M, 1, 2)
+
+        def half_extent(axis, heading, size):  # a box's half extent along the unit axis (k, 1, 1, 2)
+            cos = np.abs(axis[..., 0] * np.cos(heading) + axis[..., 1] * np.sin(heading))
+            sin = np.abs(-axis[..., 0] * np.sin(heading) + axis[..., 1] * np.cos(heading))
+            return 0.5 * (size[..., 0] * cos + size[..., 1] * sin)
+
+        u, v = towards[:, None, None, :], beside[:, None, None, :]
+        apart = mover_xy - xy[:, None, None, :]  # (k, M, T, 2)
+        along_u = np.sum(apart * u, axis=-1)  # (k, M, T)
+        gap_u = along_u - half_extent(u, yaw[:, None, None], body[:, None, None]) \
+            - half_extent(u, mover_yaw, mover_body)
+        gap_v = np.abs(np.sum(apart * v, axis=-1)) - half_extent(v, yaw[:, None, None], body[:, None, None]) \
+            - half_extent(v, mover_yaw, mover_body)
+        limits = np.where(world.log_valid[logged][None] & (gap_v < PARKED_CLEARANCE_M) & (along_u > 0),
+                          gap_u - PARKED_CLEARANCE_M, np.inf)  # (k, M, T)
+        reach = np.clip(wanted, 0.0, np.maximum(limits.min(axis=(1, 2)), 0.0))
+    return {**parked, "xy": xy + reach[:, None] * towards}
 
 
 def _populate(world: _World, rng: np.random.Generator, urban: bool, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> None:

@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 import scenariomax
 from scenariomax.scenario import array_fields
-from scenariomax.schema import OBJECT_TYPE_PEDESTRIAN, OBJECT_TYPE_VEHICLE, Sizes
+from scenariomax.schema import LANE_TYPES, OBJECT_TYPE_PEDESTRIAN, OBJECT_TYPE_VEHICLE, Sizes
 from scenariomax.sources.synthetic import (
     TOPOLOGIES,
     SyntheticKnobs,
@@ -193,6 +193,36 @@ def test_junction_parking_and_max_parked_put_parked_cars_near_the_sdc():
     assert all(int((s.valid.all(axis=1) & (s.speed.max(axis=1) <= 0)).sum()) <= 4 + 4 for s in straight)
 
 
+def _parked_rows(scenario) -> np.ndarray:
+    return np.flatnonzero(scenario.valid.all(axis=1) & (scenario.speed.max(axis=1) <= 0)
+                          & (scenario.object_type == OBJECT_TYPE_VEHICLE))
+
+
+def test_parked_reach_brings_parked_cars_nearer_the_lanes_and_keeps_the_rest_of_the_scene():
+    base_knobs = dict(max_parked=40, parked_fraction=(0.8, 1.0))
+    before, after = [], []
+    for i in range(4):
+        base = generate_scenario(9, i, SIZES, topology="straight", knobs=SyntheticKnobs(**base_knobs))
+        reach = generate_scenario(9, i, SIZES, topology="straight",
+                                  knobs=SyntheticKnobs(parked_reach=(1.0, 1.5), **base_knobs))
+        # the same objects (matched by id; the budget keeps those nearest the SDC, so rows may move)
+        shared, rows_base, rows_reach = np.intersect1d(base.object_id, reach.object_id, return_indices=True)
+        parked = np.isin(rows_base, _parked_rows(base))
+        assert np.array_equal(parked, np.isin(rows_reach, _parked_rows(reach)))
+        # everything but the parked cars' positions is the knob-off scene (the reach has a random stream of its own)
+        for name in ("x", "y", "bbox_yaw", "speed", "valid"):
+            assert np.array_equal(getattr(base, name)[rows_base[~parked]], getattr(reach, name)[rows_reach[~parked]])
+        assert np.array_equal(base.bbox_yaw[rows_base[parked]], reach.bbox_yaw[rows_reach[parked]])
+        lane_xy = base.roadgraph_xyz[base.roadgraph_valid & np.isin(base.roadgraph_type, LANE_TYPES), :2]
+        for scenario, rows, out in ((base, rows_base[parked], before), (reach, rows_reach[parked], after)):
+            out.append(np.hypot(scenario.x[rows, :1] - lane_xy[None, :, 0],  # distance to the nearest lane point
+                                scenario.y[rows, :1] - lane_xy[None, :, 1]).min(axis=1))
+        # the log stays safe: every vehicle it drives passes the nearer parked cars without touching them
+        assert overlapping_vehicle_pairs(reach) == [] and reach.validate() == []
+    nearer = np.concatenate(before) - np.concatenate(after)
+    assert (nearer > 0.5).sum() >= 10 and np.median(nearer) >= 0.3 and nearer.min() >= -1e-3, np.round(nearer, 2)
+
+
 def test_walkers_per_crosswalk_sets_how_many_cross():
     def pedestrians(walkers):
         knobs = SyntheticKnobs(walkers_per_crosswalk=walkers)
@@ -234,7 +264,8 @@ def test_driver_style_spread_widens_the_traits_around_their_centres():
     ({"topology_weights": "spaghetti:1"}, "topology_weights"), ({"topology_weights": "merge:0"}, "topology_weights"),
     ({"topology_weights": "merge:x"}, "topology_weights"),
     ({"max_parked": 2.5}, "max_parked"), ({"max_parked": 99}, "max_parked"), ({"max_parked": True}, "max_parked"),
-    ({"junction_parking": 1.5}, "junction_parking"), ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"),
+    ({"junction_parking": 1.5}, "junction_parking"), ({"parked_reach": (0.0, 2.5)}, "parked_reach"),
+    ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"),
     ({"sdc_slow_start": -0.1}, "sdc_slow_start"),
 ])
 def test_bad_knobs_raise_one_line_naming_the_knob(kwargs, name):
@@ -311,6 +342,8 @@ def test_convert_command_rejects_bad_knobs_in_one_line(tmp_path, args, words):
     SyntheticKnobs(speed_limit_scale=0.5, lane_width_m=(4.5, 5.0), parked_fraction=(1.0, 1.0)),
     SyntheticKnobs(junction_parking=1.0, max_parked=48, parked_fraction=(1.0, 1.0), sdc_slow_start=1.0,
                    walkers_per_crosswalk=(8.0, 12.0)),
+    SyntheticKnobs(junction_parking=1.0, max_parked=48, parked_fraction=(1.0, 1.0), parked_reach=(2.0, 2.0),
+                   traffic_density=3.0),
 ])
 def test_extreme_knobs_keep_the_logs_safe(knobs):
     """At the knobs' limits vehicles still never overlap nor run a red light, and the scenarios validate."""
