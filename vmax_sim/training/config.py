@@ -395,8 +395,9 @@ def _parse_value(cls, name: str, current, text: str):
         if any(len(pair) != 2 for pair in pairs):
             raise ValueError(f"expected term:weight pairs separated by commas, got {text!r}")
         return tuple((term.strip(), float(weight)) for term, weight in pairs)
-    if is_tuple:
-        return tuple(_parse_scalar(part, kind) for part in text.split(",") if part.strip())
+    if is_tuple:  # numbers as "a,b" or, as the generator's knobs write ranges, "lo:hi"
+        parts = text.replace(":", ",").split(",") if kind in (int, float) else text.split(",")
+        return tuple(_parse_scalar(part, kind) for part in parts if part.strip())
     if text.strip().lower() == "none":
         return None
     return _parse_scalar(text, kind)

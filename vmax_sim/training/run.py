@@ -169,7 +169,7 @@ def train_data_config(config: TrainConfig, path: str, seed: int) -> DataConfig:
     """The training stream: one scenario at a time, seeded shuffle, repeated forever (with every agent's path
     under self-play and IDM traffic)."""
     return data_config(config, path, batch_size=1, shuffle_seed=seed, repeat=True, prefetch=0,
-                       include_agent_paths=config.is_selfplay or config.train.traffic == "idm",
+                       include_agent_paths=config.is_selfplay or config.train.traffic != "log",
                        hide_lights=config.data.hide_lights, hide_lights_from=config.data.hide_lights_from)
 
 

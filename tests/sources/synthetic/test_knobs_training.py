@@ -24,10 +24,11 @@ from vmax_sim.training.config import (  # noqa: E402
 def test_overrides_set_nested_knobs_and_round_trip():
     config = apply_overrides(preset_config("sac"), [
         "data.synthetic.traffic_density=2", "data.synthetic.lane_width_m=2.8,4.2",
-        "data.synthetic.topology_weights=intersection4:2,merge:1", "data.synthetic.parked_fraction=0,0.3"])
+        "data.synthetic.topology_weights=intersection4:2,merge:1", "data.synthetic.parked_fraction=0,0.3",
+        "data.synthetic.parked_reach=0:1.5"])  # ranges as lo,hi or, as scenariomax's --synthetic-knob, lo:hi
     assert config.data.synthetic == SyntheticKnobs(traffic_density=2.0, lane_width_m=(2.8, 4.2),
                                                    topology_weights="intersection4:2,merge:1",
-                                                   parked_fraction=(0.0, 0.3))
+                                                   parked_fraction=(0.0, 0.3), parked_reach=(0.0, 1.5))
     values = json.loads(json.dumps(config_to_dict(config)))  # as config.json stores it
     assert config_from_dict(values) == config
     del values["data"]["synthetic"]  # a run directory from before the knobs
