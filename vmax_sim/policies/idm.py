@@ -202,11 +202,20 @@ def idm_step_acceleration(scene: Scene, arc: jax.Array, speed: jax.Array, desire
     return bounded_acceleration(accel, speed, config, dt)
 
 
+def scene_leader(scene: Scene, config: IDMConfig) -> tuple[jax.Array, jax.Array]:
+    """`corridor_leader` of the perceived scene on the path itself, passing objects at rest with
+    `config.standing_clearance` when it is set. -> (), ()"""
+    ego = scene.ego
+    standing = None if config.standing_clearance is None else 0.5 * ego.width + config.standing_clearance
+    return corridor_leader(scene.objects, scene.ego_arc, 0.0, 0.5 * ego.length, config.lane_half_width, standing,
+                           config.stop_speed)
+
+
 def idm_action(state: SimulatorState, config: IDMConfig = IDMConfig(), first_timestep: int = 10) -> jax.Array:
     """The SDC's [acceleration m/s^2, curvature 1/m] under IDM + pure pursuit. One unbatched state -> (2,)."""
     scene = perceive(state, config, first_timestep)
     ego = scene.ego
-    gap, lead_speed = corridor_leader(scene.objects, scene.ego_arc, 0.0, 0.5 * ego.length, config.lane_half_width)
+    gap, lead_speed = scene_leader(scene, config)
     accel = idm_step_acceleration(scene, scene.ego_arc, ego.speed, scene.desired_speed, gap, lead_speed, config,
                                   config.dt)
     curvature = steer(scene.path, ego, scene.ego_arc, jnp.zeros(()), config)

@@ -58,9 +58,9 @@ def idm_driver(env, config=None, speed: str = "log", follow_log: bool = True) ->
         IDMConfig,
         as_env_action,
         check_bicycle,
-        corridor_leader,
         idm_step_acceleration,
         perceive,
+        scene_leader,
         steer,
     )
 
@@ -77,9 +77,7 @@ def idm_driver(env, config=None, speed: str = "log", follow_log: bool = True) ->
             top = logged_top_speed(view, first, last)[sdc_index(view)]
             desired = jnp.minimum(desired, jnp.maximum(top, 1.0))
         ego = scene.ego
-        standing = None if config.standing_clearance is None else 0.5 * ego.width + config.standing_clearance
-        gap, lead_speed = corridor_leader(scene.objects, scene.ego_arc, 0.0, 0.5 * ego.length, config.lane_half_width,
-                                          standing, config.stop_speed)
+        gap, lead_speed = scene_leader(scene, config)
         accel = idm_step_acceleration(scene, scene.ego_arc, ego.speed, desired, gap, lead_speed, config, config.dt)
         if follow_log:
             accel = jnp.minimum(accel, log_cap_acceleration(view, scene, config))

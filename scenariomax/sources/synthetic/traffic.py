@@ -442,13 +442,14 @@ def _reach_towards_lanes(parked: dict, network: RoadNetwork, world: _World, rng:
     logged = np.flatnonzero(world.log_valid.any(axis=1))
     reach = wanted
     if len(logged):
-        body = np.array([(b.length, b.width) for b in parked["bodies"]])  # (k, 2)
-        yaw = parked["yaw"]  # (k,)
+        # the parked box's half extents along the move (across the car) and beside it (along the car)
+        parked_u = np.array([b.width for b in parked["bodies"]])[:, None, None] / 2.0  # (k, 1, 1)
+        parked_v = np.array([b.length for b in parked["bodies"]])[:, None, None] / 2.0  # (k, 1, 1)
         mover_xy = np.stack([world.log["x"][logged], world.log["y"][logged]], axis=-1)[None]  # (1, M, T, 2)
         mover_yaw = world.log["yaw"][logged][None]  # (1, M, T)
         mover_body = np.stack([world.length[logged], world.width[logged]], axis=-1)[None, :, None]  # (1, M, 1, 2)
 
-        def half_extent(axis, heading, size):  # a box's half extent along the unit axis (k, 1, 1, 2)
+        def half_extent(axis, heading, size):  # a mover box's half extent along the unit axis (k, 1, 1, 2)
             cos = np.abs(axis[..., 0] * np.cos(heading) + axis[..., 1] * np.sin(heading))
             sin = np.abs(-axis[..., 0] * np.sin(heading) + axis[..., 1] * np.cos(heading))
             return 0.5 * (size[..., 0] * cos + size[..., 1] * sin)
@@ -456,10 +457,8 @@ def _reach_towards_lanes(parked: dict, network: RoadNetwork, world: _World, rng:
         u, v = towards[:, None, None, :], beside[:, None, None, :]
         apart = mover_xy - xy[:, None, None, :]  # (k, M, T, 2)
         along_u = np.sum(apart * u, axis=-1)  # (k, M, T)
-        gap_u = along_u - half_extent(u, yaw[:, None, None], body[:, None, None]) \
-            - half_extent(u, mover_yaw, mover_body)
-        gap_v = np.abs(np.sum(apart * v, axis=-1)) - half_extent(v, yaw[:, None, None], body[:, None, None]) \
-            - half_extent(v, mover_yaw, mover_body)
+        gap_u = along_u - parked_u - half_extent(u, mover_yaw, mover_body)
+        gap_v = np.abs(np.sum(apart * v, axis=-1)) - parked_v - half_extent(v, mover_yaw, mover_body)
         limits = np.where(world.log_valid[logged][None] & (gap_v < PARKED_CLEARANCE_M) & (along_u > 0),
                           gap_u - PARKED_CLEARANCE_M, np.inf)  # (k, M, T)
         reach = np.clip(wanted, 0.0, np.maximum(limits.min(axis=(1, 2)), 0.0))
