@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from scenariomax.errors import InputError
+from scenariomax.schema import RG_LANE_SURFACE_STREET, RG_ROAD_EDGE_BOUNDARY
 from tests.metrics.helpers import LEFT_EDGE_Y, RIGHT_EDGE_Y, road_index, route_paths, straight_road
 from vmax_sim.map_index import (
     MapIndexConfig,
@@ -77,6 +78,28 @@ def test_observation_points_are_thinned_and_fixed_size(index):
     assert pts.xy.shape == (25 * config.obs_slots_per_cell, 2)
     xy = np.asarray(pts.xy)[np.asarray(pts.valid)]
     assert len(xy) > 0 and np.all(np.abs(xy[:, 0]) <= 2.5 * config.obs_cell_size + config.obs_cell_size)
+
+
+def _polylines_reordered(road: dict, order: list[int]) -> dict:
+    """The roadgraph arrays with their polylines (by id) listed in `order`."""
+    rows = np.concatenate([np.flatnonzero(road["ids"] == polyline) for polyline in order])
+    return {name: value[rows] for name, value in road.items()}
+
+
+def test_observation_slots_do_not_follow_the_sources_polyline_order():
+    # Real converted maps often list edges first, the synthetic generator lists lanes first: a network that reads
+    # the slots by position (the MLP encoder) must see the same input from both.
+    road = straight_road()
+    built = [build_map_index(r["xyz"], r["dir"], r["types"], r["ids"], r["valid"], None, np.zeros(2),
+                             speed_limit=r["speed_limit"])
+             for r in (road, _polylines_reordered(road, [5, 4, 3, 2, 1]))]
+    lanes_first, edges_first = (observation_points(index, jnp.array([0.0, 0.0]), window=5) for index in built)
+    np.testing.assert_array_equal(np.asarray(lanes_first.types), np.asarray(edges_first.types))
+    types = np.asarray(lanes_first.types).reshape(25, -1)[np.asarray(lanes_first.valid).reshape(25, -1).any(1)]
+    group = np.where(types == RG_LANE_SURFACE_STREET, 0, np.where(types == RG_ROAD_EDGE_BOUNDARY, 2, 1))
+    valid = np.asarray(lanes_first.valid).reshape(25, -1)[np.asarray(lanes_first.valid).reshape(25, -1).any(1)]
+    for cell_group, cell_valid in zip(group, valid):  # per cell: lanes, then lines, then edges
+        assert np.all(np.diff(cell_group[cell_valid]) >= 0)
 
 
 def test_project_on_paths_gives_distance_and_arc():

@@ -145,7 +145,7 @@ def _edge_distance_field(start, end, origin, edge_table, config):
 
 
 def _obs_points(xyz, dirs, types, ids, valid, speed_limit, origin, config):
-    """Thinned observation points scattered into the observation grid."""
+    """Thinned observation points scattered into the observation grid: per cell, lanes, lines, then edges."""
     go, co = config.obs_grid_size, config.obs_slots_per_cell
     selected = valid & np.isin(types, config.obs_types)
     idx = np.flatnonzero(selected)
@@ -162,7 +162,11 @@ def _obs_points(xyz, dirs, types, ids, valid, speed_limit, origin, config):
     inside = np.all((cell >= 0) & (cell < go), axis=1)
     idx, cell = idx[inside], cell[inside]
     flat = cell[:, 0] * go + cell[:, 1]
-    order = np.argsort(flat, kind="stable")  # keep polyline order within a cell so thinning is even
+    # Within a cell: lanes, then road lines, then road edges, each in polyline order (so thinning is even). The
+    # slots must not follow the source's polyline order: a network reading them by position (the MLP encoder)
+    # trained on synthetic maps, which list lanes first, sees real maps that list edges first as another input.
+    group = np.where(np.isin(types[idx], config.lane_types), 0, np.where(np.isin(types[idx], config.edge_types), 2, 1))
+    order = np.lexsort((group, flat))  # stable: by cell, then group, then polyline order
     idx, flat = idx[order], flat[order]
     first = np.searchsorted(flat, flat, side="left")
     count = np.searchsorted(flat, flat, side="right") - first
