@@ -290,7 +290,7 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # teacher still stops at the red it cannot see (seed 0, ~540k env steps: real ensemble 89.7 -> 100% accuracy, V-Max
 # 0.886 -> 0.889; held-out synthetic V-Max 0.950 -> 0.928; session 37; seed 1, 460k: real 93.1% / 0.923, session 38).
 # Two updates per step instead of 4 (session 39, seed 0): ensemble better, checkpoints worse on real scenes: kept 4.
-# Parked cars nearer the lanes with traffic that passes them (session 40): seed 0 best on real V-Max, seed 1 not: left out.
+# Parked cars nearer the lanes, traffic that passes them (session 40): seed 0 best on real V-Max, seed 1 not: left out.
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm", "algo.student_drive=0.5", "algo.student_mix=episode",
     "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=600000",
