@@ -95,9 +95,9 @@ def test_observation_slots_do_not_follow_the_sources_polyline_order():
              for r in (road, _polylines_reordered(road, [5, 4, 3, 2, 1]))]
     lanes_first, edges_first = (observation_points(index, jnp.array([0.0, 0.0]), window=5) for index in built)
     np.testing.assert_array_equal(np.asarray(lanes_first.types), np.asarray(edges_first.types))
-    types = np.asarray(lanes_first.types).reshape(25, -1)[np.asarray(lanes_first.valid).reshape(25, -1).any(1)]
+    types, valid = np.asarray(lanes_first.types).reshape(25, -1), np.asarray(lanes_first.valid).reshape(25, -1)
     group = np.where(types == RG_LANE_SURFACE_STREET, 0, np.where(types == RG_ROAD_EDGE_BOUNDARY, 2, 1))
-    valid = np.asarray(lanes_first.valid).reshape(25, -1)[np.asarray(lanes_first.valid).reshape(25, -1).any(1)]
+    assert valid.any()
     for cell_group, cell_valid in zip(group, valid):  # per cell: lanes, then lines, then edges
         assert np.all(np.diff(cell_group[cell_valid]) >= 0)
 
