@@ -64,3 +64,19 @@ def test_a_run_keeps_its_last_checkpoints_as_an_ensemble_that_evaluates_as_recor
     newest = load_trained_policy(run, step=kept[-1])
     assert not np.allclose(jax.tree.leaves(loaded.params)[0][-1], jax.tree.leaves(loaded.params)[0][0])
     assert newest.env_steps == loaded.env_steps
+
+
+@pytest.mark.slow  # ~40 s on 2 cores (a tiny BC run and the ensemble's held-out evaluation)
+def test_ensemble_members_can_come_oftener_than_checkpoints(synthetic_shards, tmp_path):
+    config = tiny_config(synthetic_shards, "bc", "train.total_env_steps=80", "train.chunk_steps=2",
+                         "train.checkpoint_every=1000", "train.ensemble=3", "train.ensemble_every=16",
+                         "train.keep_best=false")
+    run = tmp_path / "run"
+    result = train(config, run, progress=False, print_fn=lambda line: None)
+    checkpoints = sorted(int(p.name) for p in (run / "checkpoints").iterdir() if p.name.isdigit())
+    members = json.loads((run / "ensemble" / "ensemble.json").read_text())["members"]
+    assert checkpoints == [result.env_steps]  # one checkpoint, at the end
+    # three members from the run's last stretch, the newest the final policy, each at least 16 env steps apart
+    assert len(members) == 3 and members[-1] == result.env_steps
+    assert all(later - earlier >= 16 for earlier, later in zip(members, members[1:]))
+    assert result.summary["ensemble_evaluation"]["members"] == members

@@ -87,6 +87,9 @@ class LoopConfig:
     # their mean action (`vmax-sim evaluate --policy RUN/ensemble`; evaluated on the held-out split at the end of
     # the run); 0: none. Steadier than any one checkpoint on scenes unlike the training ones (docs/learning.md)
     ensemble: int = 0
+    # env steps between ensemble members; None: one with each checkpoint. Members hold no replay buffer, so they can
+    # come far oftener than checkpoints: the ensemble then spans the run's last stretch, not its last N checkpoints
+    ensemble_every: int | None = None
     save_buffer: bool = True  # the replay buffer travels in checkpoints (exact resume of off-policy runs)
     buffer_dtype: str = "float16"  # storage of floating-point observation leaves in the replay buffer
     # simulator steps each policy action is held for during training (one transition, rewards summed);
@@ -117,7 +120,7 @@ class LoopConfig:
         if self.max_wall_minutes is not None and not self.max_wall_minutes > 0:
             raise ValueError(f"train.max_wall_minutes must be positive, got {self.max_wall_minutes}")
         for name in ("total_env_steps", "chunk_steps", "pool_size", "eval_scenarios", "eval_batch_size",
-                     "checkpoint_every", "keep_checkpoints", "action_repeat"):
+                     "checkpoint_every", "keep_checkpoints", "action_repeat", "ensemble_every"):
             if getattr(self, name) is not None and getattr(self, name) < 1:
                 raise ValueError(f"train.{name} must be at least 1, got {getattr(self, name)}")
         if self.ensemble < 0:
