@@ -1,4 +1,5 @@
-"""The policies of a run's last checkpoints driving as one (`train.ensemble`): the mean of their actions.
+"""The policies of a run's last checkpoints (or of its last `train.ensemble_every` stretches) driving as one
+(`train.ensemble`): the mean of their actions.
 
 A student's score swings from one checkpoint to the next on scenes unlike its training scenes (docs/learning.md:
 real-scene accuracy 82.8-96.6% 100k env steps apart), and averaging the checkpoints' *weights* did not steady it.
@@ -48,7 +49,8 @@ def ensemble_learner(learner: Learner) -> Learner:
 
 
 class EnsembleCheckpoints:
-    """Keeps RUN/ensemble/ holding the learner state of the run's last `size` checkpoints."""
+    """Keeps RUN/ensemble/ holding the learner state of the run's last `size` members (checkpoints, or every
+    `train.ensemble_every` env steps)."""
 
     def __init__(self, run_dir: Path, size: int):
         self.run_dir = Path(run_dir)

@@ -790,7 +790,7 @@ class _Evaluator:
         summary = evaluate(policy, self.data, data_config=self.data, env_config=self.env_config,
                            obs_config=self.config.obs, num_scenarios=self.config.train.eval_scenarios,
                            policy_params=params).summary
-        self.print_fn(f"ensemble of the checkpoints at {', '.join(f'{m:,}' for m in members)} env steps: accuracy "
+        self.print_fn(f"ensemble of the policies at {', '.join(f'{m:,}' for m in members)} env steps: accuracy "
                       f"{summary['accuracy']:.3f}  V-Max score {summary['vmax_score']:.3f}  ({summary['num_episodes']} "
                       f"held-out episodes; vmax-sim evaluate --policy {directory})")
         return {**summary, "members": members}
