@@ -114,9 +114,8 @@ def test_the_dagger_preset_is_the_documented_bc_recipe_and_overrides_still_apply
     assert config.data.synthetic.sdc_slow_start == 1.0 and config.data.synthetic.max_parked == 40
     # checkpoints carry the 2.9 GB buffer: far apart; an hour's budget, not the step count, ends a run here
     assert (config.train.checkpoint_every, config.train.total_env_steps) == (100_000, 1_000_000)
-    # a brake that stops the car, and the policies of the run's last 60k env steps driving as one (docs/learning.md)
-    train = config.train
-    assert (config.env.dynamics, train.ensemble, train.ensemble_every) == ("bicycle_no_reverse", 4, 20_000)
+    # a brake that stops the car, and the last four checkpoints driving as one (docs/learning.md)
+    assert (config.env.dynamics, config.train.ensemble, config.train.ensemble_every) == ("bicycle_no_reverse", 4, None)
     assert preset_config("dagger") == config
     # a user's override wins over the preset's
     assert apply_overrides(config, ["algo.buffer_size=50000"]).algo_config.buffer_size == 50_000
