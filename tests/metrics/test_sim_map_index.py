@@ -87,8 +87,8 @@ def _polylines_reordered(road: dict, order: list[int]) -> dict:
 
 
 def test_observation_slots_do_not_follow_the_sources_polyline_order():
-    # Real converted maps often list edges first, the synthetic generator lists lanes first: a network that reads
-    # the slots by position (the MLP encoder) must see the same input from both.
+    # Real converted maps often list edges first, the synthetic generator lists lanes first: a crowded cell must keep
+    # the same points from both, in the same slots (the flat `none` encoder reads them by position).
     road = straight_road()
     built = [build_map_index(r["xyz"], r["dir"], r["types"], r["ids"], r["valid"], None, np.zeros(2),
                              speed_limit=r["speed_limit"])

@@ -163,8 +163,9 @@ def _obs_points(xyz, dirs, types, ids, valid, speed_limit, origin, config):
     idx, cell = idx[inside], cell[inside]
     flat = cell[:, 0] * go + cell[:, 1]
     # Within a cell: lanes, then road lines, then road edges, each in polyline order (so thinning is even). The
-    # slots must not follow the source's polyline order: a network reading them by position (the MLP encoder)
-    # trained on synthetic maps, which list lanes first, sees real maps that list edges first as another input.
+    # points a crowded cell keeps must not depend on the order the source lists its polylines in (the generator
+    # lists lanes first, the real converters edges first); and the flat `none` encoder reads slots by position (the
+    # MLP encoder pools over them).
     group = np.where(np.isin(types[idx], config.lane_types), 0, np.where(np.isin(types[idx], config.edge_types), 2, 1))
     order = np.lexsort((group, flat))  # stable: by cell, then group, then polyline order
     idx, flat = idx[order], flat[order]
