@@ -149,6 +149,28 @@ def test_dropout_and_occlusion(index):
     assert int(hidden.objects_valid[:, -1].sum()) == 2
 
 
+def test_map_dropout_hides_a_fresh_share_of_the_map_points_and_only_with_a_key(index):
+    config = ObservationConfig(noise=NoiseConfig(map_dropout=0.5))
+    inputs = obs_inputs()
+    clean = OBSERVE(index, inputs, ObservationConfig())
+    shown = [np.asarray(OBSERVE(index, inputs, config, jax.random.PRNGKey(seed)).roadgraph_valid) for seed in range(4)]
+    total = int(clean.roadgraph_valid.sum())
+    assert total > 20
+    for valid in shown:
+        assert not np.any(valid & ~np.asarray(clean.roadgraph_valid))  # only hides
+        assert 0.3 * total < valid.sum() < 0.7 * total
+    assert not np.array_equal(shown[0], shown[1])  # another sample each step
+    hidden = OBSERVE(index, inputs, config, jax.random.PRNGKey(0))
+    np.testing.assert_array_equal(np.asarray(hidden.roadgraph)[~shown[0]], 0.0)
+    # the objects are untouched, and without a key (evaluation) the map is whole
+    np.testing.assert_array_equal(hidden.objects, clean.objects)
+    np.testing.assert_array_equal(OBSERVE(index, inputs, config).roadgraph_valid, clean.roadgraph_valid)
+    # training environments hand the observation a key when any noise is on
+    assert config.noise.active and not config.noise.on_objects and not NoiseConfig().active
+    with pytest.raises(ValueError, match="map_dropout"):
+        NoiseConfig(map_dropout=1.0)
+
+
 def test_batched_equals_unbatched_and_no_recompiles(index):
     config = ObservationConfig()
     cases = [obs_inputs(), obs_inputs(objects=[(5.0, 3.0, 0.3, 2.0)], sdc_yaw=0.4)]

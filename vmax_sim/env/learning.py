@@ -314,8 +314,7 @@ def check_learning_settings(env_config: EnvConfig, reward_config: RewardConfig, 
 
 
 def _has_noise(config: ObservationConfig) -> bool:
-    noise = config.noise
-    return noise.position_std > 0 or noise.dropout_max_prob > 0 or noise.occlusion
+    return config.noise.active
 
 
 def _take(pool: SimulatorState, indices: jax.Array) -> SimulatorState:

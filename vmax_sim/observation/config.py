@@ -21,6 +21,24 @@ class NoiseConfig:
     dropout_start: float = 30.0  # m, objects nearer are never dropped
     dropout_max_prob: float = 0.0  # drop probability reached at ObservationConfig.max_distance
     occlusion: bool = False  # hide objects whose line of sight crosses a nearer object's box
+    # chance that each map point of the observation is hidden (its slot masked), drawn afresh every step: a student
+    # that sees another sample of the same road should drive the same (which points a crowded map cell keeps moved
+    # one checkpoint's real-scene score by up to 7 points; docs/learning.md, session 41)
+    map_dropout: float = 0.0
+
+    def __post_init__(self):
+        if not 0.0 <= self.map_dropout < 1.0:
+            raise ValueError(f"obs.noise.map_dropout must be in [0, 1), got {self.map_dropout}")
+
+    @property
+    def on_objects(self) -> bool:
+        """Whether any of the object noises is on."""
+        return self.position_std > 0 or self.dropout_max_prob > 0 or self.occlusion
+
+    @property
+    def active(self) -> bool:
+        """Whether the observation needs a key (any noise on)."""
+        return self.on_objects or self.map_dropout > 0
 
 
 OBJECT_SELECTIONS = ("nearest", "route")

@@ -258,7 +258,7 @@ def observe(map_index: MapIndex, inputs: ObservationInputs, config: ObservationC
                                      config.num_objects)
     indices, index_valid = candidates
     noise = config.noise
-    if key is not None and (noise.position_std > 0 or noise.dropout_max_prob > 0 or noise.occlusion):
+    if key is not None and noise.on_objects:
         inputs, visible = apply_noise(key, inputs, indices, index_valid, config)
         index_valid = index_valid & visible
     objects, objects_valid = object_features(inputs, indices, index_valid, config)
@@ -268,6 +268,10 @@ def observe(map_index: MapIndex, inputs: ObservationInputs, config: ObservationC
     if config.sdc_history is not None:  # the older steps hidden, as if never recorded
         sdc_valid = sdc_valid & (jnp.arange(sdc_valid.shape[0]) >= sdc_valid.shape[0] - config.sdc_history)
     roadgraph, roadgraph_valid = roadgraph_features(map_index, origin, origin_yaw, config)
+    if key is not None and noise.map_dropout > 0:  # a fresh sample of the map's points every step
+        shown = jax.random.uniform(jax.random.fold_in(key, 2), roadgraph_valid.shape) >= noise.map_dropout
+        roadgraph_valid = roadgraph_valid & shown
+        roadgraph = jnp.where(roadgraph_valid[..., None], roadgraph, 0.0)
     lights, lights_valid = light_features(inputs, config)
     return Observation(sdc=jnp.where(sdc_valid[:, None], sdc, 0.0), sdc_valid=sdc_valid,
                        objects=objects, objects_valid=objects_valid, roadgraph=roadgraph,
