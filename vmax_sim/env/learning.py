@@ -192,7 +192,7 @@ class LearningEnv:
         return sim, shared, metrics, terminated, truncated
 
     def _observe(self, sim: SimulatorState, shared: SharedQueries, key: jax.Array) -> Observation:
-        noise_key = key if _has_noise(self.obs_config) else None
+        noise_key = key if self.obs_config.noise.active else None
         return sdc_observation(sim, shared, self.obs_config, noise_key)
 
     def _advance(self, sim: SimulatorState, arcs: jax.Array, metrics: dict, action: jax.Array,
@@ -311,10 +311,6 @@ def check_learning_settings(env_config: EnvConfig, reward_config: RewardConfig, 
     check_reward_config(reward_config)
     if action_repeat < 1:
         raise ValueError(f"action_repeat must be at least 1, got {action_repeat}")
-
-
-def _has_noise(config: ObservationConfig) -> bool:
-    return config.noise.active
 
 
 def _take(pool: SimulatorState, indices: jax.Array) -> SimulatorState:

@@ -31,7 +31,7 @@ from vmax_sim.datatypes import Action, RoadgraphPoints, SimulatorState, update_t
 from vmax_sim.env.agent_view import agent_view, choose_agents, stop_sign_points, with_sdc_route
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.environment import Environment
-from vmax_sim.env.learning import EPISODE_FLAGS, TERMINATION_METRICS, _has_noise, check_learning_settings
+from vmax_sim.env.learning import EPISODE_FLAGS, TERMINATION_METRICS, check_learning_settings
 from vmax_sim.env.metrics_adapter import reference_arcs, sdc_index, sdc_observation, step_inputs
 from vmax_sim.metrics import MetricsConfig, shared_queries, step_metrics
 from vmax_sim.observation import Observation, ObservationConfig
@@ -171,7 +171,7 @@ class SelfPlayEnv:
         return shared, step_metrics(sim.map_index, inputs, self.metrics_config, shared)
 
     def _observe(self, sim: SimulatorState, slot: jax.Array, shared, key: jax.Array | None) -> Observation:
-        noise_key = key if key is not None and _has_noise(self.obs_config) else None
+        noise_key = key if key is not None and self.obs_config.noise.active else None
         return sdc_observation(agent_view(sim, slot), shared, self.obs_config, noise_key)
 
     def _labels(self, sim: SimulatorState, slots: jax.Array, acting: jax.Array, signs: RoadgraphPoints) -> jax.Array:

@@ -52,11 +52,20 @@ class EnsembleCheckpoints:
     """Keeps RUN/ensemble/ holding the learner state of the run's last `size` members (checkpoints, or every
     `train.ensemble_every` env steps)."""
 
-    def __init__(self, run_dir: Path, size: int):
+    def __init__(self, run_dir: Path, size: int, every: int | None = None, start: int = 0):
         self.run_dir = Path(run_dir)
         self.directory = self.run_dir / ENSEMBLE_DIR
         self.store = CheckpointStore(self.directory / "checkpoints", keep=size)
         self.size = size
+        self.every = every  # None: the run adds a member with each checkpoint
+        self.last = start  # env steps of the newest member on the own schedule (the run's start step at first)
+
+    def offer(self, env_steps: int, carry, host: dict, final: bool = False) -> None:
+        """On the own schedule (`every`), adds `carry` as a member when `every` env steps have passed since the
+        last one, or at the run's `final` step; with checkpoints (`every` None) the run calls `add` itself."""
+        if self.every and env_steps != self.last and (final or env_steps - self.last >= self.every):
+            self.add(env_steps, carry, host)
+            self.last = env_steps
 
     def add(self, env_steps: int, carry, host: dict) -> None:
         """Writes `carry`'s learner (its replay buffer left out) as the newest member."""

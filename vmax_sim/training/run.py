@@ -589,13 +589,12 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
                  f"{per_chunk:,})")
     bar = _Progress(target, env_steps, progress)
     best = BestCheckpoint(run_dir, SELFPLAY_SCORE if config.is_selfplay else SDC_SCORE) if loop.keep_best else None
-    ensemble = EnsembleCheckpoints(run_dir, loop.ensemble) if loop.ensemble else None
-
-    members_apart = loop.ensemble_every  # None: a member with each checkpoint
+    ensemble = (EnsembleCheckpoints(run_dir, loop.ensemble, loop.ensemble_every, start=env_steps)
+                if loop.ensemble else None)
 
     def save_checkpoint(env_steps: int, carry, host: dict) -> None:  # the run's checkpoint (and an ensemble member)
         store.save(env_steps, carry, host, with_buffer=loop.save_buffer)
-        if ensemble is not None and members_apart is None:
+        if ensemble is not None and ensemble.every is None:
             ensemble.add(env_steps, carry, host)
     wall_before = float(host["wall_s"])
 
@@ -604,7 +603,7 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
 
     budget_s = loop.max_wall_minutes * 60.0 if loop.max_wall_minutes else math.inf
     start = time.perf_counter()
-    last_checkpoint = last_member = env_steps
+    last_checkpoint = env_steps
     last_eval = env_steps if env_steps > 0 else 0
     chunks = 0
     warned_lost = False
@@ -651,9 +650,8 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
                         best.offer(env_steps, summary, carry, host_record(scalars["wall_s"]))
                     last_eval = env_steps
                     release_freed_memory()
-                if ensemble is not None and members_apart and (env_steps - last_member >= members_apart or last_chunk):
-                    ensemble.add(env_steps, carry, host_record(scalars["wall_s"]))
-                    last_member = env_steps
+                if ensemble is not None:
+                    ensemble.offer(env_steps, carry, host_record(scalars["wall_s"]), final=last_chunk)
                 if env_steps - last_checkpoint >= loop.checkpoint_every or last_chunk:
                     release_freed_memory()
                     save_checkpoint(env_steps, carry, host_record(scalars["wall_s"]))
@@ -671,8 +669,8 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
     wall_s = wall_before + time.perf_counter() - start
     if stopped == "max_wall_minutes" and last_checkpoint != env_steps:  # the budget ran out before the first chunk
         save_checkpoint(env_steps, carry, host_record(wall_s))
-    if ensemble is not None and members_apart and last_member != env_steps:
-        ensemble.add(env_steps, carry, host_record(wall_s))
+    if ensemble is not None:
+        ensemble.offer(env_steps, carry, host_record(wall_s), final=True)
     finished = env_steps >= loop.total_env_steps or stopped == "max_wall_minutes"
     if stopped == "max_wall_minutes":
         print_fn(f"stopped at the wall-clock budget (train.max_wall_minutes={loop.max_wall_minutes:g}) after "
