@@ -20,13 +20,15 @@ class InputError(ValueError):
     """A raw input file is unreadable or malformed. The message is one line naming file and reason."""
 
 
-def describe_os_error(error: OSError, resumable: bool = False, where: str | os.PathLike | None = None) -> str:
+def describe_os_error(error: OSError, resume_with: str | None = None, where: str | os.PathLike | None = None) -> str:
     """One line for an OS error (read-only or full disk, permission, missing file): the path once, the problem,
-    what to do. `resumable`: the command can continue where it stopped (convert --resume). `where`: the folder
-    being written, named when the error carries no file name (a full disk seen by a library's writer)."""
+    what to do. `resume_with`: the option that continues the command where it stopped (`--resume` for a conversion,
+    `--resume RUN_DIR` for training). `where`: the folder being written, named when the error carries no file name
+    (a full disk seen by a library's writer)."""
     where = error.filename or where or "the output folder"
+    rerun = "rerun" + (f" with {resume_with}" if resume_with else "")
     if error.errno == errno.ENOSPC:
-        advice = "free some space, then rerun" + (" with --resume" if resumable else "")
+        advice = f"free some space, then {rerun}"
     elif error.errno in (errno.EROFS, errno.EACCES, errno.EPERM):
         advice = "choose a folder you can write to, or fix its permissions"
     elif error.errno == errno.ENOENT:
@@ -34,7 +36,7 @@ def describe_os_error(error: OSError, resumable: bool = False, where: str | os.P
     elif error.errno in (errno.EEXIST, errno.ENOTDIR):
         advice = "a file stands where a folder is needed; choose another path"
     else:
-        advice = "fix it, then rerun" + (" with --resume" if resumable else "")
+        advice = f"fix it, then {rerun}"
     return f"{where}: {error.strerror or type(error).__name__}; {advice}"
 
 

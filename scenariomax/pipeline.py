@@ -671,7 +671,7 @@ def convert(source: Source, settings: ConvertSettings) -> ConversionResult:
     try:
         return _convert_into(out, source, settings, units, start)
     except OSError as error:
-        raise ConversionError(describe_os_error(error, resumable=True)) from None
+        raise ConversionError(describe_os_error(error, resume_with="--resume")) from None
 
 
 def _check_settings(settings: ConvertSettings) -> None:

@@ -62,5 +62,6 @@ def test_an_os_error_without_a_file_name_names_the_folder_written():
     from scenariomax.errors import describe_os_error
 
     full = OSError(errno.ENOSPC, "No space left on device")  # as a library's writer raises it
-    line = describe_os_error(full, resumable=True, where="runs/sac")
-    assert line.startswith("runs/sac: No space left on device; free some space") and "?" not in line
+    line = describe_os_error(full, resume_with="--resume runs/sac", where="runs/sac")
+    # the rerun it advises is the command that continues: `vmax-sim train --resume` needs the run directory
+    assert line == "runs/sac: No space left on device; free some space, then rerun with --resume runs/sac"

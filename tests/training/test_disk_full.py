@@ -94,4 +94,4 @@ def test_a_full_disk_during_training_prints_one_line_naming_the_folder(synthetic
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1, done.stderr  # no traceback, no warning: the error alone
     assert lines[0].startswith(f"error: {full / 'run'}") and "No space left on device" in lines[0], lines[0]
-    assert "--resume" in lines[0]
+    assert lines[0].endswith(f"rerun with --resume {full / 'run'}")  # the option takes the run directory

@@ -525,7 +525,7 @@ def train(config: TrainConfig, run_dir: str | Path, *, resume: bool = False, pro
     except FolderBusyError as error:
         raise InputError(str(error)) from None
     except OSError as error:  # a full disk or a lost permission, in our code or a library's writer
-        raise InputError(describe_os_error(error, resumable=True, where=run_dir)) from None
+        raise InputError(describe_os_error(error, resume_with=f"--resume {run_dir}", where=run_dir)) from None
 
 
 def _train_locked(config: TrainConfig | None, run_dir: Path, *, resume: bool, progress: bool,
