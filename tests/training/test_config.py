@@ -116,6 +116,8 @@ def test_the_dagger_preset_is_the_documented_bc_recipe_and_overrides_still_apply
     assert (config.train.checkpoint_every, config.train.total_env_steps) == (100_000, 1_000_000)
     # a brake that stops the car, and the last four checkpoints driving as one (docs/learning.md)
     assert (config.env.dynamics, config.train.ensemble, config.train.ensemble_every) == ("bicycle_no_reverse", 4, None)
+    # a fresh quarter of the map's points hidden in each training observation: steadier on real scenes
+    assert config.obs.noise.map_dropout == 0.25 and config.obs.noise.active
     assert preset_config("dagger") == config
     # a user's override wins over the preset's
     assert apply_overrides(config, ["algo.buffer_size=50000"]).algo_config.buffer_size == 50_000
