@@ -299,8 +299,8 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # against 89.7 / 0.880 on average) and a little above it on held-out synthetic (92.6 / 0.933 against 91.8 / 0.923):
 # the preset keeps them. Each training observation hides a fresh quarter of the map's points (`obs.noise.map_dropout
 # =0.25`; evaluation sees the whole map): the hour, seed 0, per checkpoint from 300k on real scenes 81.6% /
-# 0.834 -> 93.1% / 0.960, held-out synthetic 91.0% / 0.914 -> 96.3% / 0.945; seed 1 ahead on real scenes at 100k
-# and 200k (docs/learning.md, session 42).
+# 0.834 -> 93.1% / 0.960, held-out synthetic 91.0% / 0.914 -> 96.3% / 0.945; seed 1 real 85.1% / 0.861 -> 89.7% /
+# 0.881, synthetic level (87.7% -> 88.3%); both ensembles 96.6% on real scenes (docs/learning.md, session 42).
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm", "algo.student_drive=0.5", "algo.student_mix=episode",
     "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=600000",
