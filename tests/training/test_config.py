@@ -47,6 +47,17 @@ def test_bad_overrides_fail_in_one_line(override, message):
     assert "\n" not in str(error.value)
 
 
+def test_a_check_spanning_two_fields_sees_both_overrides_in_either_order():
+    # behaviour cloning on the mode's squared error alone: nll_weight=0 is refused only while mse_weight is 0 too
+    for order in (["algo.nll_weight=0", "algo.mse_weight=1"], ["algo.mse_weight=1", "algo.nll_weight=0"]):
+        config = apply_overrides(preset_config("bc-dagger"), order)
+        assert (config.algo_config.nll_weight, config.algo_config.mse_weight) == (0.0, 1.0)
+    with pytest.raises(ValueError, match="nll_weight and mse_weight must be >= 0 and not both 0"):
+        apply_overrides(preset_config("bc-dagger"), ["algo.nll_weight=0"])
+    with pytest.raises(ValueError, match="train.teacher_speed_factor must be in"):
+        apply_overrides(preset_config("bc-dagger"), ["train.teacher_speed_factor=3", "train.teacher=idm"])
+
+
 def test_idm_traffic_is_a_training_option_that_self_play_refuses():
     from vmax_sim.training.run import components, train_data_config
 

@@ -424,12 +424,29 @@ def _override_field(obj, path: list[str], text: str, full_key: str):
     if len(path) > 1:
         if not dataclasses.is_dataclass(current):
             raise ValueError(f"unknown setting {full_key!r}: {name!r} has no sub-fields")
-        return dataclasses.replace(obj, **{name: _override_field(current, path[1:], text, full_key)})
+        return _unchecked_replace(obj, name, _override_field(current, path[1:], text, full_key))
     try:
         value = _parse_value(type(obj), name, current, text)
     except ValueError as error:
         raise ValueError(f"bad value for {full_key}: {error}") from None
-    return dataclasses.replace(obj, **{name: value})
+    return _unchecked_replace(obj, name, value)
+
+
+def _unchecked_replace(obj, name: str, value):
+    """A copy of the frozen dataclass `obj` with one field set, its checks not run yet: a check that spans two
+    fields (`algo.mse_weight=1 algo.nll_weight=0`) must see both overrides, in either order (`_checked`)."""
+    copy = object.__new__(type(obj))
+    copy.__dict__.update(obj.__dict__)
+    object.__setattr__(copy, name, value)
+    return copy
+
+
+def _checked(value):
+    """`value` rebuilt through its constructor, nested dataclasses first, so every __post_init__ check runs."""
+    if not dataclasses.is_dataclass(value) or isinstance(value, type):
+        return value
+    nested = {f.name: _checked(getattr(value, f.name)) for f in dataclasses.fields(value) if f.init}
+    return dataclasses.replace(value, **nested)
 
 
 def apply_overrides(config: TrainConfig, overrides: Sequence[str]) -> TrainConfig:
@@ -461,6 +478,10 @@ def apply_overrides(config: TrainConfig, overrides: Sequence[str]) -> TrainConfi
             changes[attribute] = _override_field(current(attribute), parts[1:], text, key.strip())
         except (TypeError, ValueError) as error:
             raise ValueError(str(error).splitlines()[0]) from None
+    try:
+        changes = {attribute: _checked(value) for attribute, value in changes.items()}
+    except (TypeError, ValueError) as error:
+        raise ValueError(str(error).splitlines()[0]) from None
     return dataclasses.replace(config, **_drop_unused_teacher(config, changes, overrides)) if changes else config
 
 
