@@ -5,7 +5,10 @@ itself (covariate shift), or copy what its observation shows of the last action 
 the last action makes that copy a good fit). This script drives a training run's held-out split twice, once with
 the teacher, once with the student, and at every step compares the student's action with the teacher's label for
 that state: mean absolute error and bias per action dimension (normalised units, [-1, 1]), and the share of steps
-where the student stands (< 0.5 m/s) and holds still while the teacher would pull away (label > +0.05).
+where the student stands (< 0.5 m/s) and holds still while the teacher would pull away (label > +0.05). And how
+much the likelihood's atanh stretches the acceleration labels (BC fits a Gaussian before the tanh, so its mode
+follows tanh(mean(atanh(label))), which hard brakes near -1 would pull down): the share of labels beyond +-0.99
+and that stretched mean beside the plain one.
 
 Usage: python benchmarks/imitation_gap.py RUN_DIR [--teacher pdm|pdm_state|idm] [--data SHARDS] [--num-scenarios N]
        [--step N] [--json]
@@ -23,6 +26,8 @@ import numpy as np
 
 STANDING_MPS = 0.5  # the SDC counts as standing below this speed
 PULL_AWAY = 0.05  # a normalised acceleration label above this asks the SDC to move off
+SATURATED = 0.99  # a label beyond this is a full brake or throttle
+LABEL_EPS = 1e-3  # BC's default `expert_action_eps`: labels are clipped to [-1 + eps, 1 - eps] before atanh
 
 
 def gap_statistics(student: np.ndarray, teacher: np.ndarray, speed: np.ndarray) -> dict:
@@ -34,7 +39,11 @@ def gap_statistics(student: np.ndarray, teacher: np.ndarray, speed: np.ndarray) 
             "mae_accel": float(np.abs(error[:, 0]).mean()), "mae_steer": float(np.abs(error[:, 1]).mean()),
             "bias_accel": float(error[:, 0].mean()), "bias_steer": float(error[:, 1].mean()),
             "standing_share": float(standing.mean()),
-            "held_still_share": float(stuck.sum() / max(int((standing & (teacher[:, 0] > PULL_AWAY)).sum()), 1))}
+            "held_still_share": float(stuck.sum() / max(int((standing & (teacher[:, 0] > PULL_AWAY)).sum()), 1)),
+            "saturated_label_share": float((np.abs(teacher[:, 0]) >= SATURATED).mean()),
+            "mean_label_accel": float(teacher[:, 0].mean()),
+            "stretched_mean_label_accel": float(np.tanh(np.arctanh(np.clip(teacher[:, 0], LABEL_EPS - 1,
+                                                                           1 - LABEL_EPS)).mean()))}
 
 
 def drive(loaded, env_config, teacher_fn, data: str, num_scenarios: int | None, driver: str) -> dict:
@@ -101,7 +110,9 @@ def main() -> None:
         print(f"  {driver.replace('_', ' ')}: {r['steps']} steps, accel MAE {r['mae_accel']:.3f} "
               f"(bias {r['bias_accel']:+.3f}), steer MAE {r['mae_steer']:.3f}; "
               f"standing {100 * r['standing_share']:.1f}% of steps, held still where the teacher pulls away "
-              f"{100 * r['held_still_share']:.1f}%; "
+              f"{100 * r['held_still_share']:.1f}%; acceleration labels: {100 * r['saturated_label_share']:.1f}% "
+              f"at +-{SATURATED}, mean {r['mean_label_accel']:+.3f}, tanh(mean atanh) "
+              f"{r['stretched_mean_label_accel']:+.3f}; "
               f"accuracy {100 * r['accuracy']:.1f}%")
 
 

@@ -24,3 +24,12 @@ def test_a_student_that_stays_where_its_teacher_pulls_away_is_counted():
     assert stats["mae_accel"] == pytest.approx((0.25 + 0.24 + 0.35 + 0.05 + 0.0 + 0.1) / 6)
     assert stats["bias_accel"] == pytest.approx((-0.25 - 0.24 - 0.35 - 0.05 + 0.0 + 0.1) / 6)
     assert stats["mae_steer"] == pytest.approx(0.0)
+
+
+def test_full_brake_labels_pull_the_stretched_mean_far_below_the_plain_one():
+    # nine gentle +0.2 labels and one full brake: the plain mean stays positive, the likelihood's mode brakes
+    teacher = np.array([[0.2, 0.0]] * 9 + [[-1.0, 0.0]])
+    stats = gap_statistics(teacher, teacher, np.full(10, 5.0))
+    assert stats["saturated_label_share"] == pytest.approx(0.1)
+    assert stats["mean_label_accel"] == pytest.approx(0.08)
+    assert stats["stretched_mean_label_accel"] < -0.15  # tanh((9 * atanh(0.2) + atanh(-0.999)) / 10) = -0.19

@@ -301,6 +301,8 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # =0.25`; evaluation sees the whole map): the hour, seed 0, per checkpoint from 300k on real scenes 81.6% /
 # 0.834 -> 93.1% / 0.960, held-out synthetic 91.0% / 0.914 -> 96.3% / 0.945; seed 1 real 85.1% / 0.861 -> 89.7% /
 # 0.881, synthetic level (87.7% -> 88.3%); both ensembles 96.6% on real scenes (docs/learning.md, session 42).
+# BC's likelihood stays: the mode's squared error instead (`algo.mse_weight=1 algo.nll_weight=0`, seed 0, session 43)
+# was worse on both splits at every checkpoint from 200k (end 84 / 0.866 -> 89.7 / 0.885) and drove slower.
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm", "algo.student_drive=0.5", "algo.student_mix=episode",
     "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=600000",
