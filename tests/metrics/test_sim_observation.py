@@ -171,6 +171,27 @@ def test_map_dropout_hides_a_fresh_share_of_the_map_points_and_only_with_a_key(i
         NoiseConfig(map_dropout=1.0)
 
 
+def test_sdc_history_dropout_hides_the_whole_past_at_a_fresh_share_of_the_steps_and_only_with_a_key(index):
+    config = ObservationConfig(noise=NoiseConfig(sdc_history_dropout=0.5))
+    inputs = obs_inputs()
+    clean = OBSERVE(index, inputs, ObservationConfig())
+    assert bool(np.all(clean.sdc_valid))
+    seen = [np.asarray(OBSERVE(index, inputs, config, jax.random.PRNGKey(seed)).sdc_valid) for seed in range(40)]
+    hidden = [valid for valid in seen if not valid.all()]
+    assert 8 < len(hidden) < 32  # about half the steps
+    for valid in hidden:  # all of the past goes, never the present
+        assert valid[-1] and not valid[:-1].any()
+    past_hidden = OBSERVE(index, inputs, config, jax.random.PRNGKey(next(i for i, v in enumerate(seen) if not v.all())))
+    np.testing.assert_array_equal(np.asarray(past_hidden.sdc)[:-1], 0.0)
+    np.testing.assert_array_equal(past_hidden.sdc[-1], clean.sdc[-1])
+    np.testing.assert_array_equal(past_hidden.roadgraph_valid, clean.roadgraph_valid)  # the rest untouched
+    # without a key (evaluation) the past is always shown; training environments hand a key when it is on
+    np.testing.assert_array_equal(OBSERVE(index, inputs, config).sdc_valid, clean.sdc_valid)
+    assert config.noise.active and not config.noise.on_objects
+    with pytest.raises(ValueError, match="sdc_history_dropout"):
+        NoiseConfig(sdc_history_dropout=1.0)
+
+
 def test_batched_equals_unbatched_and_no_recompiles(index):
     config = ObservationConfig()
     cases = [obs_inputs(), obs_inputs(objects=[(5.0, 3.0, 0.3, 2.0)], sdc_yaw=0.4)]

@@ -25,10 +25,15 @@ class NoiseConfig:
     # that sees another sample of the same road should drive the same (which points a crowded map cell keeps moved
     # one checkpoint's real-scene score by up to 7 points; docs/learning.md, session 41)
     map_dropout: float = 0.0
+    # chance that an observation hides the SDC's own past (every step but now), drawn afresh every step: a student
+    # that reads its teacher's next label off its own standing history brakes where the teacher pulls away (the
+    # copycat effect; hiding the past always, `sdc_history=1`, cost more than it gained: docs/learning.md, session 35)
+    sdc_history_dropout: float = 0.0
 
     def __post_init__(self):
-        if not 0.0 <= self.map_dropout < 1.0:
-            raise ValueError(f"obs.noise.map_dropout must be in [0, 1), got {self.map_dropout}")
+        for name in ("map_dropout", "sdc_history_dropout"):
+            if not 0.0 <= getattr(self, name) < 1.0:
+                raise ValueError(f"obs.noise.{name} must be in [0, 1), got {getattr(self, name)}")
 
     @property
     def on_objects(self) -> bool:
@@ -38,7 +43,7 @@ class NoiseConfig:
     @property
     def active(self) -> bool:
         """Whether the observation needs a key (any noise on)."""
-        return self.on_objects or self.map_dropout > 0
+        return self.on_objects or self.map_dropout > 0 or self.sdc_history_dropout > 0
 
 
 OBJECT_SELECTIONS = ("nearest", "route")

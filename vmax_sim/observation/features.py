@@ -267,6 +267,9 @@ def observe(map_index: MapIndex, inputs: ObservationInputs, config: ObservationC
     sdc_valid = inputs.sdc_valid
     if config.sdc_history is not None:  # the older steps hidden, as if never recorded
         sdc_valid = sdc_valid & (jnp.arange(sdc_valid.shape[0]) >= sdc_valid.shape[0] - config.sdc_history)
+    if key is not None and noise.sdc_history_dropout > 0:  # the past hidden at a fresh share of the steps
+        hide_past = jax.random.uniform(jax.random.fold_in(key, 3)) < noise.sdc_history_dropout
+        sdc_valid = sdc_valid & ~(hide_past & (jnp.arange(sdc_valid.shape[0]) < sdc_valid.shape[0] - 1))
     roadgraph, roadgraph_valid = roadgraph_features(map_index, origin, origin_yaw, config)
     if key is not None and noise.map_dropout > 0:  # a fresh sample of the map's points every step
         shown = jax.random.uniform(jax.random.fold_in(key, 2), roadgraph_valid.shape) >= noise.map_dropout
