@@ -27,7 +27,8 @@ class NoiseConfig:
     map_dropout: float = 0.0
     # chance that an observation hides the SDC's own past (every step but now), drawn afresh every step: a student
     # that reads its teacher's next label off its own standing history brakes where the teacher pulls away (the
-    # copycat effect; hiding the past always, `sdc_history=1`, cost more than it gained: docs/learning.md, session 35)
+    # copycat effect; hiding the past always, `sdc_history=1`, cost more than it gained: docs/learning.md, session 35).
+    # Half an hour at 0.5 was behind the preset on both splits and held still more, not less (session 43)
     sdc_history_dropout: float = 0.0
 
     def __post_init__(self):
