@@ -12,6 +12,7 @@ objects, every step kept, synthetic scenes closer to real ones; docs/learning.md
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import types
@@ -437,10 +438,9 @@ def _override_field(obj, path: list[str], text: str, full_key: str):
 def _unchecked_replace(obj, name: str, value):
     """A copy of the frozen dataclass `obj` with one field set, its checks not run yet: a check that spans two
     fields (`algo.mse_weight=1 algo.nll_weight=0`) must see both overrides, in either order (`_checked`)."""
-    copy = object.__new__(type(obj))
-    copy.__dict__.update(obj.__dict__)
-    object.__setattr__(copy, name, value)
-    return copy
+    changed = copy.copy(obj)  # copies the fields without running __init__
+    object.__setattr__(changed, name, value)
+    return changed
 
 
 def _checked(value):
@@ -464,27 +464,31 @@ def apply_overrides(config: TrainConfig, overrides: Sequence[str]) -> TrainConfi
             changes["algo_config"] = get_config(name, preset_name)
         return changes.get(attribute, getattr(config, attribute))
 
-    for item in overrides:
-        if "=" not in item:
-            raise ValueError(f"override {item!r} is not of the form section.field=value")
-        key, text = item.split("=", 1)
-        parts = key.strip().split(".")
-        if key.strip() in ("algo", "algo_preset"):  # a fresh algorithm config from the new name / preset
-            changes.update({key.strip(): text.strip(), "algo_config": None})
-            continue
-        if len(parts) < 2 or parts[0] not in SECTIONS:
-            raise ValueError(f"override {item!r}: the key must start with one of {', '.join(SECTIONS)} "
-                             f"(e.g. algo.learning_rate=3e-4)")
-        attribute = _SECTION_FIELD[parts[0]]
-        try:
-            changes[attribute] = _override_field(current(attribute), parts[1:], text, key.strip())
-        except (TypeError, ValueError) as error:
-            raise ValueError(str(error).splitlines()[0]) from None
     try:
+        for item in overrides:
+            _apply_one(item, changes, current)
         changes = {attribute: _checked(value) for attribute, value in changes.items()}
     except (TypeError, ValueError) as error:
         raise ValueError(str(error).splitlines()[0]) from None
     return dataclasses.replace(config, **_drop_unused_teacher(config, changes, overrides)) if changes else config
+
+
+def _apply_one(item: str, changes: dict[str, Any], current) -> None:
+    """One `section.field=value` override into `changes` (TrainConfig field -> its new, not yet checked value);
+    `current(field)`: the field's value so far."""
+    if "=" not in item:
+        raise ValueError(f"override {item!r} is not of the form section.field=value")
+    key, text = item.split("=", 1)
+    key = key.strip()
+    if key in ("algo", "algo_preset"):  # a fresh algorithm config from the new name / preset
+        changes.update({key: text.strip(), "algo_config": None})
+        return
+    parts = key.split(".")
+    if len(parts) < 2 or parts[0] not in SECTIONS:
+        raise ValueError(f"override {item!r}: the key must start with one of {', '.join(SECTIONS)} "
+                         f"(e.g. algo.learning_rate=3e-4)")
+    attribute = _SECTION_FIELD[parts[0]]
+    changes[attribute] = _override_field(current(attribute), parts[1:], text, key)
 
 
 def _drop_unused_teacher(config: TrainConfig, changes: dict[str, Any], overrides: Sequence[str]) -> dict[str, Any]:
