@@ -3,14 +3,15 @@
 import math
 
 import chex
+import flax.struct
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from tests.agents import toy
+from vmax_sim.agents import Transition, get_config, make_learner
 from vmax_sim.agents import distributions as D
-from vmax_sim.agents import get_config, make_learner
 from vmax_sim.agents.bc import losses as bc_losses
 from vmax_sim.agents.bc_sac.losses import bc_weight_at, make_actor_loss
 from vmax_sim.agents.sac.losses import make_losses
@@ -37,6 +38,51 @@ def test_bc_clips_expert_actions_on_the_bounds():
     inside = bc_losses.nll_loss(dist, jnp.array([[1 - 1e-3], [-1 + 1e-3]]), 1e-3)
     assert bool(jnp.isfinite(at_bound))
     np.testing.assert_allclose(at_bound, inside, rtol=1e-6)
+
+
+def test_bc_row_weights_hand_value_and_standing_rows():
+    # two rows: -log p and the squared error of each, then their means weighted 3 : 1
+    dist = D.TanhGaussian(loc=jnp.zeros((2, 1)), log_std=jnp.zeros((2, 1)))
+    expert = jnp.array([[math.tanh(0.5)], [0.0]])
+    per_row = [0.125 + 0.5 * math.log(2 * math.pi) + math.log(1 - math.tanh(0.5) ** 2), 0.5 * math.log(2 * math.pi)]
+    weights = jnp.array([3.0, 1.0])
+    loss, metrics = bc_losses.bc_loss(dist, expert, mse_weight=1.0, weights=weights)
+    np.testing.assert_allclose(metrics["bc_nll"], (3 * per_row[0] + per_row[1]) / 4, rtol=1e-5)
+    np.testing.assert_allclose(metrics["bc_mse"], 3 * math.tanh(0.5) ** 2 / 4, rtol=1e-5)
+    np.testing.assert_allclose(loss, metrics["bc_nll"] + metrics["bc_mse"], rtol=1e-6)
+    # standing is read from the SDC's velocity now (last history step), not from an older step
+    sdc = jnp.zeros((3, 2, 6)).at[0, -1, 2].set(0.01).at[1, -1, 3].set(0.03).at[2, 0, 2].set(0.5)
+    np.testing.assert_allclose(bc_losses.standing_weights(sdc, 0.5 / 30, 4.0), [4.0, 1.0, 4.0])
+
+
+@flax.struct.dataclass
+class _SdcOnly:
+    sdc: jax.Array  # (B, 1, 6) the SDC's features now
+
+
+def test_bc_standing_weight_pulls_the_fit_towards_the_standing_labels():
+    # rows that look nearly alike, half standing (0.3 m/s) labelled +0.5, half moving (0.9 m/s) labelled -0.5:
+    # weighted 9 : 1 the policy's actions there lean to the standing rows' label, unweighted to neither
+    size = 64
+    moving = jnp.arange(size) % 2 == 1
+    sdc = jnp.zeros((size, 1, 6)).at[:, 0, 2].set(jnp.where(moving, 0.9, 0.3) / 30)
+    batch = Transition.make(obs=_SdcOnly(sdc=sdc), action=jnp.zeros((size, 1)), reward=jnp.zeros(size),
+                            discount=jnp.ones(size), next_obs=_SdcOnly(sdc=sdc),
+                            expert_action=jnp.where(moving, -0.5, 0.5)[:, None])
+
+    def fitted_mean_action(standing_weight):
+        config = get_config("bc", "debug", learning_rate=1e-3, standing_weight=standing_weight)
+        learner = make_learner("bc", config, lambda: toy.ToyEncoder(8), 1)
+        state = learner.init(jax.random.key(0), batch.obs)
+        keys = jax.random.split(jax.random.key(1), 300)
+        state, _ = jax.lax.scan(lambda s, k: learner.update(s, batch, k), state, keys)
+        return float(jnp.mean(learner.act(learner.policy_params(state), batch.obs, jax.random.key(0), True)))
+
+    plain, weighted = fitted_mean_action(1.0), fitted_mean_action(9.0)
+    assert abs(plain) < 0.15
+    assert weighted > plain + 0.2
+    with pytest.raises(ValueError, match="standing_weight"):
+        get_config("bc", "debug", standing_weight=0.0)
 
 
 def test_bc_learns_the_toy_expert():

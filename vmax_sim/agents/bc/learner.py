@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import optax
 
 from vmax_sim.agents.bc.config import BCConfig
-from vmax_sim.agents.bc.losses import bc_loss
+from vmax_sim.agents.bc.losses import bc_loss, standing_weights
 from vmax_sim.agents.bc.networks import make_networks
 from vmax_sim.agents.common import apply_gradients, ema_weight, global_norm, make_optimizer, polyak_update, scalar
 from vmax_sim.agents.networks import EncoderFactory
@@ -38,8 +38,11 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
                             ema_params=params if config.ema_decay > 0 else None)
 
     def loss_fn(params: Params, batch: Transition):
+        weights = None
+        if config.standing_weight != 1.0:
+            weights = standing_weights(batch.obs.sdc, config.standing_speed, config.standing_weight)
         return bc_loss(actor.apply(params, batch.obs), batch.expert_action, config.nll_weight, config.mse_weight,
-                       config.expert_action_eps)
+                       config.expert_action_eps, weights)
 
     def update(state: BCTrainState, batch: Transition, key: jax.Array) -> tuple[BCTrainState, Metrics]:
         del key  # the loss is deterministic

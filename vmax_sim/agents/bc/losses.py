@@ -3,7 +3,8 @@
     L_BC = nll_weight * mean_B(-log pi(a_E | s)) + mse_weight * mean_B sum_A (tanh(loc(s)) - a_E)^2
 
 log pi is the tanh-Gaussian density of the expert action a_E, clipped to [-1 + eps, 1 - eps] first
-(expert actions often sit on the bounds, where atanh is infinite).
+(expert actions often sit on the bounds, where atanh is infinite). With row weights w (B,) every mean_B is
+the weighted one, sum_B w * x / sum_B w.
 """
 
 from __future__ import annotations
@@ -16,22 +17,36 @@ from vmax_sim.agents.common import scalar
 from vmax_sim.agents.types import Metrics
 
 
-def nll_loss(dist: D.TanhGaussian, expert_action: jax.Array, eps: float) -> jax.Array:
-    """mean_B -log pi(a_E | s): dist (B, A), expert_action (B, A) -> ()."""
-    return -jnp.mean(D.log_prob(dist, expert_action, eps))
+def _mean(values: jax.Array, weights: jax.Array | None) -> jax.Array:
+    """values (B,) -> () their mean, weighted by weights (B,) when given."""
+    return jnp.mean(values) if weights is None else jnp.sum(weights * values) / jnp.sum(weights)
 
 
-def mode_mse_loss(dist: D.TanhGaussian, expert_action: jax.Array) -> jax.Array:
+def nll_loss(dist: D.TanhGaussian, expert_action: jax.Array, eps: float, weights: jax.Array | None = None
+             ) -> jax.Array:
+    """mean_B -log pi(a_E | s): dist (B, A), expert_action (B, A), weights (B,) or None -> ()."""
+    return -_mean(D.log_prob(dist, expert_action, eps), weights)
+
+
+def mode_mse_loss(dist: D.TanhGaussian, expert_action: jax.Array, weights: jax.Array | None = None) -> jax.Array:
     """mean_B sum_A (tanh(loc) - a_E)^2: -> ()."""
-    return jnp.mean(jnp.sum(jnp.square(D.mode(dist) - expert_action), axis=-1))
+    return _mean(jnp.sum(jnp.square(D.mode(dist) - expert_action), axis=-1), weights)
 
 
 def bc_loss(dist: D.TanhGaussian, expert_action: jax.Array, nll_weight: float = 1.0, mse_weight: float = 0.0,
-            eps: float = 1e-3) -> tuple[jax.Array, Metrics]:
-    """The weighted BC loss () and its metrics (bc_nll, bc_mse, bc_mae)."""
-    nll = nll_loss(dist, expert_action, eps)
-    mse = mode_mse_loss(dist, expert_action)
+            eps: float = 1e-3, weights: jax.Array | None = None) -> tuple[jax.Array, Metrics]:
+    """The weighted BC loss () and its metrics (bc_nll, bc_mse, bc_mae: the row-weighted means)."""
+    nll = nll_loss(dist, expert_action, eps, weights)
+    mse = mode_mse_loss(dist, expert_action, weights)
     loss = nll_weight * nll + mse_weight * mse
     metrics = {"bc_loss": scalar(loss), "bc_nll": scalar(nll), "bc_mse": scalar(mse),
-               "bc_mae": scalar(jnp.mean(jnp.abs(D.mode(dist) - expert_action)))}
+               "bc_mae": scalar(_mean(jnp.mean(jnp.abs(D.mode(dist) - expert_action), axis=-1), weights))}
     return loss, metrics
+
+
+def standing_weights(sdc_features: jax.Array, standing_speed: float, standing_weight: float) -> jax.Array:
+    """Row weights (B,): standing_weight where the SDC stands (its speed now below standing_speed, both in the
+    observation's normalised units), 1 elsewhere. sdc_features (B, k, 6): the observation's SDC history,
+    x, y, vx, vy, cos, sin, last = now."""
+    speed = jnp.linalg.norm(sdc_features[:, -1, 2:4].astype(jnp.float32), axis=-1)
+    return jnp.where(speed < standing_speed, standing_weight, 1.0)
