@@ -27,7 +27,7 @@ import numpy as np
 from vmax_sim.agents.bc.config import BCConfig
 
 STANDING_MPS = 0.5  # the SDC counts as standing below this speed
-PULL_AWAY = 0.05  # a normalised acceleration label above this asks the SDC to move off
+PULL_AWAY = BCConfig.pull_away_accel  # a normalised acceleration label above this asks the SDC to move off
 SATURATED = 0.99  # a label beyond this is a full brake or throttle
 LABEL_EPS = BCConfig.expert_action_eps  # BC's default: labels are clipped to [-1 + eps, 1 - eps] before atanh
 

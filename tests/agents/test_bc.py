@@ -50,9 +50,11 @@ def test_bc_row_weights_hand_value_and_standing_rows():
     np.testing.assert_allclose(metrics["bc_nll"], (3 * per_row[0] + per_row[1]) / 4, rtol=1e-5)
     np.testing.assert_allclose(metrics["bc_mse"], 3 * math.tanh(0.5) ** 2 / 4, rtol=1e-5)
     np.testing.assert_allclose(loss, metrics["bc_nll"] + metrics["bc_mse"], rtol=1e-6)
-    # standing is read from the SDC's velocity now (last history step), not from an older step
-    sdc = jnp.zeros((3, 2, 6)).at[0, -1, 2].set(0.01).at[1, -1, 3].set(0.03).at[2, 0, 2].set(0.5)
-    np.testing.assert_allclose(bc_losses.standing_weights(sdc, 0.5 / 30, 4.0), [4.0, 1.0, 4.0])
+    # standing is read from the SDC's velocity now (last history step), not from an older step; a standing row
+    # whose label moves off weighs pull_away_weight, one whose label holds standing_weight
+    sdc = jnp.zeros((4, 2, 6)).at[0, -1, 2].set(0.01).at[1, -1, 3].set(0.03).at[2, 0, 2].set(0.5)
+    labels = jnp.array([[0.0, 0.0], [0.3, 0.0], [0.0, 0.0], [0.3, 0.0]])
+    np.testing.assert_allclose(bc_losses.standing_weights(sdc, labels, 0.5 / 30, 4.0, 0.05, 7.0), [4, 1, 4, 7])
 
 
 @flax.struct.dataclass
@@ -60,9 +62,10 @@ class _SdcOnly:
     sdc: jax.Array  # (B, 1, 6) the SDC's features now
 
 
-def test_bc_standing_weight_pulls_the_fit_towards_the_standing_labels():
-    # rows that look nearly alike, half standing (0.3 m/s) labelled +0.5, half moving (0.9 m/s) labelled -0.5:
-    # weighted 9 : 1 the policy's actions there lean to the standing rows' label, unweighted to neither
+def test_bc_pull_away_weight_pulls_the_fit_towards_the_standing_labels():
+    # rows that look nearly alike, half standing (0.3 m/s) labelled +0.5 (moving off), half moving (0.9 m/s)
+    # labelled -0.5: with the moving-off rows weighted 9 : 1 the policy's actions there lean to their label; weighting
+    # the standing rows that hold (none here) or none at all leans to neither
     size = 64
     moving = jnp.arange(size) % 2 == 1
     sdc = jnp.zeros((size, 1, 6)).at[:, 0, 2].set(jnp.where(moving, 0.9, 0.3) / 30)
@@ -70,19 +73,20 @@ def test_bc_standing_weight_pulls_the_fit_towards_the_standing_labels():
                             discount=jnp.ones(size), next_obs=_SdcOnly(sdc=sdc),
                             expert_action=jnp.where(moving, -0.5, 0.5)[:, None])
 
-    def fitted_mean_action(standing_weight):
-        config = get_config("bc", "debug", learning_rate=1e-3, standing_weight=standing_weight)
+    def fitted_mean_action(**weights):
+        config = get_config("bc", "debug", learning_rate=1e-3, **weights)
         learner = make_learner("bc", config, lambda: toy.ToyEncoder(8), 1)
         state = learner.init(jax.random.key(0), batch.obs)
         keys = jax.random.split(jax.random.key(1), 300)
         state, _ = jax.lax.scan(lambda s, k: learner.update(s, batch, k), state, keys)
         return float(jnp.mean(learner.act(learner.policy_params(state), batch.obs, jax.random.key(0), True)))
 
-    plain, weighted = fitted_mean_action(1.0), fitted_mean_action(9.0)
+    plain = fitted_mean_action()
     assert abs(plain) < 0.15
-    assert weighted > plain + 0.2
-    with pytest.raises(ValueError, match="standing_weight"):
-        get_config("bc", "debug", standing_weight=0.0)
+    assert fitted_mean_action(pull_away_weight=9.0) > plain + 0.2
+    np.testing.assert_allclose(fitted_mean_action(standing_weight=9.0), plain, atol=1e-5)
+    with pytest.raises(ValueError, match="pull_away_weight"):
+        get_config("bc", "debug", pull_away_weight=0.0)
 
 
 def test_bc_learns_the_toy_expert():

@@ -25,12 +25,15 @@ class BCConfig:
     nll_weight: float = 1.0  # weight of -log pi(expert_action | s)
     mse_weight: float = 0.0  # weight of |tanh(loc) - expert_action|^2 (optional anchor of the mode)
     expert_action_eps: float = 1e-3  # expert actions clipped to [-1 + eps, 1 - eps] before atanh
-    # loss weight of the rows where the SDC stands (its observed speed below standing_speed, in the observation's
-    # units: m/s over obs.max_speed, 30 m/s by default), against 1 for the others. A student standing behind a
+    # loss weights of the rows where the SDC stands (its observed speed below standing_speed, in the observation's
+    # units: m/s over obs.max_speed, 30 m/s by default), against 1 for the others: pull_away_weight where the label
+    # moves off (acceleration above pull_away_accel), standing_weight where it holds. A student standing behind a
     # leader that moves off held still where its teacher pulled away: a few % of the rows, whose errors count
-    # little in the mean (1: every row alike)
+    # little in the mean (1 and 1: every row alike)
     standing_weight: float = 1.0
+    pull_away_weight: float = 1.0
     standing_speed: float = 0.5 / 30.0
+    pull_away_accel: float = 0.05
     # decay of an exponential moving average of the policy parameters, updated after every gradient step; when
     # > 0 the average is the policy that acts, is evaluated and is saved (0: the raw parameters). Small-batch
     # steps move a closed-loop driver between checkpoints; the average keeps what the recent steps agree on
@@ -60,7 +63,8 @@ class BCConfig:
 
     def __post_init__(self):
         check_positive(self, "learning_rate", "num_envs", "batch_size", "updates_per_step", "unroll_length",
-                       "buffer_size", "expert_action_eps", "standing_weight", "standing_speed")
+                       "buffer_size", "expert_action_eps", "standing_weight", "pull_away_weight",
+                       "standing_speed")
         if not 0.0 <= self.ema_decay < 1.0:
             raise ValueError(f"ema_decay must be in [0, 1), got {self.ema_decay}")
         if not 0.0 <= self.student_drive <= 1.0:

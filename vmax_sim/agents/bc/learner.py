@@ -39,8 +39,9 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
 
     def loss_fn(params: Params, batch: Transition):
         weights = None
-        if config.standing_weight != 1.0:
-            weights = standing_weights(batch.obs.sdc, config.standing_speed, config.standing_weight)
+        if config.standing_weight != 1.0 or config.pull_away_weight != 1.0:
+            weights = standing_weights(batch.obs.sdc, batch.expert_action, config.standing_speed,
+                                       config.standing_weight, config.pull_away_accel, config.pull_away_weight)
         return bc_loss(actor.apply(params, batch.obs), batch.expert_action, config.nll_weight, config.mse_weight,
                        config.expert_action_eps, weights)
 

@@ -44,9 +44,12 @@ def bc_loss(dist: D.TanhGaussian, expert_action: jax.Array, nll_weight: float = 
     return loss, metrics
 
 
-def standing_weights(sdc_features: jax.Array, standing_speed: float, standing_weight: float) -> jax.Array:
-    """Row weights (B,): standing_weight where the SDC stands (its speed now below standing_speed, both in the
-    observation's normalised units), 1 elsewhere. sdc_features (B, k, 6): the observation's SDC history,
-    x, y, vx, vy, cos, sin, last = now."""
+def standing_weights(sdc_features: jax.Array, expert_action: jax.Array, standing_speed: float,
+                     standing_weight: float, pull_away_accel: float, pull_away_weight: float) -> jax.Array:
+    """Row weights (B,): where the SDC stands (its speed now below standing_speed, both in the observation's
+    normalised units), pull_away_weight if the label's acceleration is above pull_away_accel (the teacher moves
+    off), else standing_weight; 1 where it moves. sdc_features (B, k, 6): the observation's SDC history, x, y, vx,
+    vy, cos, sin, last = now; expert_action (B, A), acceleration first."""
     speed = jnp.linalg.norm(sdc_features[:, -1, 2:4].astype(jnp.float32), axis=-1)
-    return jnp.where(speed < standing_speed, standing_weight, 1.0)
+    standing = jnp.where(expert_action[:, 0] > pull_away_accel, pull_away_weight, standing_weight)
+    return jnp.where(speed < standing_speed, standing, 1.0)
