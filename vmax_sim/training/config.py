@@ -304,6 +304,9 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # 0.881, synthetic level (87.7% -> 88.3%); both ensembles 96.6% on real scenes (docs/learning.md, session 42).
 # BC's likelihood stays: the mode's squared error instead (`algo.mse_weight=1 algo.nll_weight=0`, seed 0, session 43)
 # was worse on both splits at every checkpoint from 200k (end 84 / 0.866 -> 89.7 / 0.885) and drove slower.
+# The rows where the SDC stands weigh as the others: x10 where the label moves off (`algo.pull_away_weight=10`, the
+# issue's hour, seed 0, session 44) left the student moving off at its teacher's states but not at its own, and was
+# behind on both splits from 200k (ensemble 94 / 0.924 -> 89.7 / 0.865); x5 on every standing row taught holding.
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm", "algo.student_drive=0.5", "algo.student_mix=episode",
     "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=600000",
