@@ -8,7 +8,9 @@ that state: mean absolute error and bias per action dimension (normalised units,
 where the student stands (< 0.5 m/s) and holds still while the teacher would pull away (label > +0.05). And how
 much the likelihood's atanh stretches the acceleration labels (BC fits a Gaussian before the tanh, so its mode
 follows tanh(mean(atanh(label))), which hard brakes near -1 would pull down): the share of labels beyond +-0.99
-and that stretched mean beside the plain one.
+and that stretched mean beside the plain one. And how sure the student is where it holds: the spread (std) of
+SAMPLES actions drawn from its Gaussian at each step, median over the held steps beside the moving ones (a student
+averaging two answers there would be wider than where it drives).
 
 Usage: python benchmarks/imitation_gap.py RUN_DIR [--teacher pdm|pdm_state|idm] [--data SHARDS] [--num-scenarios N]
        [--step N] [--json]
@@ -29,15 +31,25 @@ from vmax_sim.agents.bc.config import BCConfig
 STANDING_MPS = 0.5  # the SDC counts as standing below this speed
 PULL_AWAY = BCConfig.pull_away_accel  # a normalised acceleration label above this asks the SDC to move off
 SATURATED = 0.99  # a label beyond this is a full brake or throttle
+SAMPLES = 32  # actions drawn from the student's Gaussian per step for its spread
 LABEL_EPS = BCConfig.expert_action_eps  # BC's default: labels are clipped to [-1 + eps, 1 - eps] before atanh
 
 
-def gap_statistics(student: np.ndarray, teacher: np.ndarray, speed: np.ndarray) -> dict:
-    """student, teacher (n, A) actions at the same n states, speed (n,) m/s -> the summary (plain floats)."""
+def _median(values: np.ndarray) -> float | None:
+    return float(np.median(values)) if values.size else None
+
+
+def gap_statistics(student: np.ndarray, teacher: np.ndarray, speed: np.ndarray,
+                   sample_std: np.ndarray | None = None) -> dict:
+    """student, teacher (n, A) actions at the same n states, speed (n,) m/s, sample_std (n,) the spread of the
+    student's sampled accelerations (or None) -> the summary (plain floats; None where no step qualifies)."""
     error = student - teacher
     standing = speed < STANDING_MPS
     stuck = standing & (teacher[:, 0] > PULL_AWAY) & (student[:, 0] <= PULL_AWAY)
-    return {"steps": int(len(error)),
+    spread = {}
+    if sample_std is not None:
+        spread = {"held_sample_std": _median(sample_std[stuck]), "moving_sample_std": _median(sample_std[~standing])}
+    return {**spread, "steps": int(len(error)),
             "mae_accel": float(np.abs(error[:, 0]).mean()), "mae_steer": float(np.abs(error[:, 1]).mean()),
             "bias_accel": float(error[:, 0].mean()), "bias_steer": float(error[:, 1].mean()),
             "standing_share": float(standing.mean()),
@@ -60,24 +72,27 @@ def drive(loaded, env_config, teacher_fn, data: str, num_scenarios: int | None, 
     config = loaded.config
     pairs: list[tuple[np.ndarray, ...]] = []
 
-    def record(student, teacher, speed, live):
+    def record(student, teacher, speed, live, sample_std):
         pairs.append((np.asarray(student).reshape(-1, 2), np.asarray(teacher).reshape(-1, 2),
-                      np.asarray(speed).reshape(-1), np.asarray(live).reshape(-1)))
+                      np.asarray(speed).reshape(-1), np.asarray(live).reshape(-1), np.asarray(sample_std).reshape(-1)))
 
     def action_fn(params, state, observation, key):
         slot = sdc_index(state)
         student = loaded.policy.action_fn(params, state, observation, key).data[slot]
+        batched = jax.tree.map(lambda a: a[None], observation)
+        samples = jax.vmap(lambda k: loaded.learner.act(params, batched, k, False)[0, 0])(
+            jax.random.split(key, SAMPLES))  # (SAMPLES,) sampled accelerations
         teacher = teacher_fn(state)
         traj, t = state.sim_trajectory, state.timestep
         speed = jnp.hypot(traj.vel_x[slot, t], traj.vel_y[slot, t])
-        jax.debug.callback(record, student, teacher, speed, traj.valid[slot, t])
+        jax.debug.callback(record, student, teacher, speed, traj.valid[slot, t], jnp.std(samples))
         return sdc_action(state, teacher if driver == "teacher" else student)
 
     result = evaluate(Policy(f"{driver}-driven", action_fn, needs_observation=True),
                       data_config(config, data, batch_size=8), env_config=env_config,
                       obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params)
-    student, teacher, speed, live = (np.concatenate(parts) for parts in zip(*pairs))
-    summary = gap_statistics(student[live], teacher[live], speed[live])
+    student, teacher, speed, live, sample_std = (np.concatenate(parts) for parts in zip(*pairs))
+    summary = gap_statistics(student[live], teacher[live], speed[live], sample_std[live])
     summary["accuracy"] = float(result.summary["accuracy"])
     return summary
 
@@ -114,8 +129,13 @@ def main() -> None:
               f"standing {100 * r['standing_share']:.1f}% of steps, held still where the teacher pulls away "
               f"{100 * r['held_still_share']:.1f}%; acceleration labels: {100 * r['saturated_label_share']:.1f}% "
               f"at +-{SATURATED}, mean {r['mean_label_accel']:+.3f}, tanh(mean atanh) "
-              f"{r['stretched_mean_label_accel']:+.3f}; "
+              f"{r['stretched_mean_label_accel']:+.3f}; student's sampled acceleration std "
+              f"{_text(r['held_sample_std'])} where held, {_text(r['moving_sample_std'])} moving; "
               f"accuracy {100 * r['accuracy']:.1f}%")
+
+
+def _text(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
 
 
 if __name__ == "__main__":

@@ -33,3 +33,13 @@ def test_full_brake_labels_pull_the_stretched_mean_far_below_the_plain_one():
     assert stats["saturated_label_share"] == pytest.approx(0.1)
     assert stats["mean_label_accel"] == pytest.approx(0.08)
     assert stats["stretched_mean_label_accel"] < -0.15  # tanh((9 * atanh(0.2) + atanh(-0.999)) / 10) = -0.19
+
+
+def test_the_students_spread_is_read_where_it_holds_and_where_it_moves():
+    # held at steps 0 and 1 (spreads 0.3, 0.5), moving at step 3 (0.1); step 2 stands but the teacher holds too
+    teacher = np.array([[0.25, 0.0], [0.25, 0.0], [-0.1, 0.0], [0.0, 0.0]])
+    student = np.array([[0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    stats = gap_statistics(student, teacher, np.array([0.0, 0.1, 0.2, 9.0]), np.array([0.3, 0.5, 0.9, 0.1]))
+    assert stats["held_sample_std"] == pytest.approx(0.4)
+    assert stats["moving_sample_std"] == pytest.approx(0.1)
+    assert gap_statistics(student[3:], teacher[3:], np.array([9.0]), np.array([0.1]))["held_sample_std"] is None
