@@ -239,6 +239,12 @@ def apply_noise(key: jax.Array, inputs: ObservationInputs, indices: jnp.ndarray,
     return inputs.replace(object_xy=xy), visible
 
 
+def observed_sdc_speed(sdc: jnp.ndarray) -> jnp.ndarray:
+    """The SDC's speed now as its observation shows it, in the observation's units (m/s over max_speed):
+    sdc (..., k, 6), `Observation.sdc` -> (...)."""
+    return jnp.linalg.norm(sdc[..., -1, 2:4].astype(jnp.float32), axis=-1)
+
+
 def observe(map_index: MapIndex, inputs: ObservationInputs, config: ObservationConfig = DEFAULT_OBSERVATION_CONFIG,
             key: jax.Array | None = None, candidates: tuple[jnp.ndarray, jnp.ndarray] | None = None,
             path_projection: PathProjection | None = None) -> Observation:

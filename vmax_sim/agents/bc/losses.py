@@ -15,6 +15,7 @@ import jax.numpy as jnp
 from vmax_sim.agents import distributions as D
 from vmax_sim.agents.common import scalar
 from vmax_sim.agents.types import Metrics
+from vmax_sim.observation.features import observed_sdc_speed
 
 
 def _mean(values: jax.Array, weights: jax.Array | None) -> jax.Array:
@@ -50,6 +51,5 @@ def standing_weights(sdc_features: jax.Array, expert_action: jax.Array, standing
     normalised units), pull_away_weight if the label's acceleration is above pull_away_accel (the teacher moves
     off), else standing_weight; 1 where it moves. sdc_features (B, k, 6): the observation's SDC history, x, y, vx,
     vy, cos, sin, last = now; expert_action (B, A), acceleration first."""
-    speed = jnp.linalg.norm(sdc_features[:, -1, 2:4].astype(jnp.float32), axis=-1)
     standing = jnp.where(expert_action[:, 0] > pull_away_accel, pull_away_weight, standing_weight)
-    return jnp.where(speed < standing_speed, standing, 1.0)
+    return jnp.where(observed_sdc_speed(sdc_features) < standing_speed, standing, 1.0)
