@@ -10,7 +10,10 @@ much the likelihood's atanh stretches the acceleration labels (BC fits a Gaussia
 follows tanh(mean(atanh(label))), which hard brakes near -1 would pull down): the share of labels beyond +-0.99
 and that stretched mean beside the plain one. And how sure the student is where it holds: the spread (std) of
 SAMPLES actions drawn from its Gaussian at each step, median over the held steps beside the moving ones (a student
-averaging two answers there would be wider than where it drives).
+averaging two answers there would be wider than where it drives). And what holds it there: at each held step the
+student's mean acceleration again with one part of its observation changed (VARIANTS: the other objects hidden, its
+own past hidden, the map hidden, the route targets hidden, a green light shown ahead), and the share of held steps
+where it would then pull away.
 
 Usage: python benchmarks/imitation_gap.py RUN_DIR [--teacher pdm|pdm_state|idm] [--data SHARDS] [--num-scenarios N]
        [--step N] [--json]
@@ -33,22 +36,43 @@ PULL_AWAY = BCConfig.pull_away_accel  # a normalised acceleration label above th
 SATURATED = 0.99  # a label beyond this is a full brake or throttle
 SAMPLES = 32  # actions drawn from the student's Gaussian per step for its spread
 LABEL_EPS = BCConfig.expert_action_eps  # BC's default: labels are clipped to [-1 + eps, 1 - eps] before atanh
+VARIANTS = ("no_objects", "no_own_past", "no_map", "no_route", "green_ahead")
+GREEN_AHEAD_M = 6.0  # the shown light stands this far ahead of the SDC's centre, on its axis
+GREEN = 2  # the light features' state one-hot: red, yellow, green, unknown
 
 
 def _median(values: np.ndarray) -> float | None:
     return float(np.median(values)) if values.size else None
 
 
+def observation_variants(observation, max_distance: float) -> dict:
+    """VARIANTS of one unbatched observation: a part hidden (its valid flags cleared) or a green light shown
+    GREEN_AHEAD_M ahead in the first light slot. max_distance: the observation's position scale (m)."""
+    import jax.numpy as jnp
+
+    o = observation
+    green = jnp.zeros(o.lights.shape[-1]).at[0].set(GREEN_AHEAD_M / max_distance).at[2 + GREEN].set(1.0)
+    return {"no_objects": o.replace(objects_valid=jnp.zeros_like(o.objects_valid)),
+            "no_own_past": o.replace(sdc_valid=o.sdc_valid.at[:-1].set(False)),
+            "no_map": o.replace(roadgraph_valid=jnp.zeros_like(o.roadgraph_valid)),
+            "no_route": o.replace(path_targets_valid=jnp.zeros_like(o.path_targets_valid)),
+            "green_ahead": o.replace(lights=o.lights.at[0].set(green), lights_valid=o.lights_valid.at[0].set(True))}
+
+
 def gap_statistics(student: np.ndarray, teacher: np.ndarray, speed: np.ndarray,
-                   sample_std: np.ndarray | None = None) -> dict:
+                   sample_std: np.ndarray | None = None, variant_accel: dict | None = None) -> dict:
     """student, teacher (n, A) actions at the same n states, speed (n,) m/s, sample_std (n,) the spread of the
-    student's sampled accelerations (or None) -> the summary (plain floats; None where no step qualifies)."""
+    student's sampled accelerations (or None), variant_accel {VARIANT: (n,) the student's acceleration with that
+    change} (or None) -> the summary (plain floats; None where no step qualifies)."""
     error = student - teacher
     standing = speed < STANDING_MPS
     stuck = standing & (teacher[:, 0] > PULL_AWAY) & (student[:, 0] <= PULL_AWAY)
     spread = {}
     if sample_std is not None:
         spread = {"held_sample_std": _median(sample_std[stuck]), "moving_sample_std": _median(sample_std[~standing])}
+    if variant_accel is not None:  # share of the held steps where the changed observation pulls away
+        spread["pulls_away_with"] = {name: float((accel[stuck] > PULL_AWAY).mean()) if stuck.any() else None
+                                     for name, accel in variant_accel.items()}
     return {**spread, "steps": int(len(error)),
             "mae_accel": float(np.abs(error[:, 0]).mean()), "mae_steer": float(np.abs(error[:, 1]).mean()),
             "bias_accel": float(error[:, 0].mean()), "bias_steer": float(error[:, 1].mean()),
@@ -72,9 +96,13 @@ def drive(loaded, env_config, teacher_fn, data: str, num_scenarios: int | None, 
     config = loaded.config
     pairs: list[tuple[np.ndarray, ...]] = []
 
-    def record(student, teacher, speed, live, sample_std):
+    def record(student, teacher, speed, live, sample_std, variants):
         pairs.append((np.asarray(student).reshape(-1, 2), np.asarray(teacher).reshape(-1, 2),
-                      np.asarray(speed).reshape(-1), np.asarray(live).reshape(-1), np.asarray(sample_std).reshape(-1)))
+                      np.asarray(speed).reshape(-1), np.asarray(live).reshape(-1), np.asarray(sample_std).reshape(-1),
+                      np.asarray(variants).reshape(-1, len(VARIANTS))))
+
+    def mean_accel(params, observation, key):
+        return loaded.learner.act(params, jax.tree.map(lambda a: a[None], observation), key, True)[0, 0]
 
     def action_fn(params, state, observation, key):
         slot = sdc_index(state)
@@ -82,17 +110,20 @@ def drive(loaded, env_config, teacher_fn, data: str, num_scenarios: int | None, 
         batched = jax.tree.map(lambda a: a[None], observation)
         samples = jax.vmap(lambda k: loaded.learner.act(params, batched, k, False)[0, 0])(
             jax.random.split(key, SAMPLES))  # (SAMPLES,) sampled accelerations
+        variants = observation_variants(observation, config.obs.max_distance)
+        variant_accel = jnp.stack([mean_accel(params, variants[name], key) for name in VARIANTS])  # (V,)
         teacher = teacher_fn(state)
         traj, t = state.sim_trajectory, state.timestep
         speed = jnp.hypot(traj.vel_x[slot, t], traj.vel_y[slot, t])
-        jax.debug.callback(record, student, teacher, speed, traj.valid[slot, t], jnp.std(samples))
+        jax.debug.callback(record, student, teacher, speed, traj.valid[slot, t], jnp.std(samples), variant_accel)
         return sdc_action(state, teacher if driver == "teacher" else student)
 
     result = evaluate(Policy(f"{driver}-driven", action_fn, needs_observation=True),
                       data_config(config, data, batch_size=8), env_config=env_config,
                       obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params)
-    student, teacher, speed, live, sample_std = (np.concatenate(parts) for parts in zip(*pairs))
-    summary = gap_statistics(student[live], teacher[live], speed[live], sample_std[live])
+    student, teacher, speed, live, sample_std, variants = (np.concatenate(parts) for parts in zip(*pairs))
+    summary = gap_statistics(student[live], teacher[live], speed[live], sample_std[live],
+                             {name: variants[live, i] for i, name in enumerate(VARIANTS)})
     summary["accuracy"] = float(result.summary["accuracy"])
     return summary
 
@@ -132,6 +163,12 @@ def main() -> None:
               f"{r['stretched_mean_label_accel']:+.3f}; student's sampled acceleration std "
               f"{_text(r['held_sample_std'])} where held, {_text(r['moving_sample_std'])} moving; "
               f"accuracy {100 * r['accuracy']:.1f}%")
+        print("    held steps where it pulls away once changed: " + ", ".join(
+            f"{name} {_percent(share)}" for name, share in r["pulls_away_with"].items()))
+
+
+def _percent(share: float | None) -> str:
+    return "-" if share is None else f"{100 * share:.0f}%"
 
 
 def _text(value: float | None) -> str:

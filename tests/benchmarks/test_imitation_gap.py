@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from imitation_gap import gap_statistics  # noqa: E402
+from imitation_gap import gap_statistics, observation_variants  # noqa: E402
 
 
 def test_a_student_that_stays_where_its_teacher_pulls_away_is_counted():
@@ -43,3 +43,40 @@ def test_the_students_spread_is_read_where_it_holds_and_where_it_moves():
     assert stats["held_sample_std"] == pytest.approx(0.4)
     assert stats["moving_sample_std"] == pytest.approx(0.1)
     assert gap_statistics(student[3:], teacher[3:], np.array([9.0]), np.array([0.1]))["held_sample_std"] is None
+
+
+def test_the_held_steps_count_where_a_changed_observation_pulls_away():
+    # held at steps 0-2; hiding the objects pulls away at two of them (and at the moving step 3, not counted)
+    teacher = np.array([[0.25, 0.0]] * 3 + [[0.1, 0.0]])
+    student = np.zeros((4, 2))
+    speed = np.array([0.0, 0.1, 0.2, 9.0])
+    variants = {"no_objects": np.array([0.3, 0.2, 0.0, 0.4]), "green_ahead": np.array([0.0, 0.05, -0.1, 0.4])}
+    stats = gap_statistics(student, teacher, speed, np.zeros(4), variants)
+    assert stats["pulls_away_with"]["no_objects"] == pytest.approx(2 / 3)
+    assert stats["pulls_away_with"]["green_ahead"] == 0.0  # +0.05 is not above the pull-away threshold
+    moving = gap_statistics(student[3:], teacher[3:], speed[3:], np.zeros(1), {k: v[3:] for k, v in variants.items()})
+    assert moving["pulls_away_with"]["no_objects"] is None
+
+
+def test_each_variant_changes_only_its_part_of_the_observation():
+    import jax
+    import jax.numpy as jnp
+
+    from vmax_sim.observation.features import Observation
+
+    k, n, m, lights, targets = 5, 3, 4, 2, 2
+    ones = lambda *shape: np.ones(shape, bool)  # noqa: E731
+    obs = Observation(sdc=np.zeros((k, 6), np.float32), sdc_valid=ones(k), objects=np.zeros((n, k, 12), np.float32),
+                      objects_valid=ones(n, k), roadgraph=np.zeros((m, 8), np.float32), roadgraph_valid=ones(m),
+                      lights=np.zeros((lights, 6), np.float32), lights_valid=np.zeros(lights, bool),
+                      path_targets=np.zeros((targets, 2), np.float32), path_targets_valid=ones(targets))
+    variants = observation_variants(jax.tree.map(jnp.asarray, obs), max_distance=50.0)
+    assert not np.asarray(variants["no_objects"].objects_valid).any()
+    assert np.asarray(variants["no_objects"].roadgraph_valid).all()
+    assert np.asarray(variants["no_own_past"].sdc_valid).tolist() == [False] * (k - 1) + [True]
+    assert not np.asarray(variants["no_map"].roadgraph_valid).any()
+    assert not np.asarray(variants["no_route"].path_targets_valid).any()
+    green = variants["green_ahead"]
+    assert np.asarray(green.lights_valid).tolist() == [True, False]
+    np.testing.assert_allclose(np.asarray(green.lights[0]), [6.0 / 50.0, 0.0, 0.0, 0.0, 1.0, 0.0])  # green one-hot
+    assert np.asarray(green.objects_valid).all() and np.asarray(green.sdc_valid).all()
