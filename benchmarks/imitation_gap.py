@@ -38,7 +38,6 @@ SAMPLES = 32  # actions drawn from the student's Gaussian per step for its sprea
 LABEL_EPS = BCConfig.expert_action_eps  # BC's default: labels are clipped to [-1 + eps, 1 - eps] before atanh
 VARIANTS = ("no_objects", "no_own_past", "no_map", "no_route", "green_ahead")
 GREEN_AHEAD_M = 6.0  # the shown light stands this far ahead of the SDC's centre, on its axis
-GREEN = 2  # the light features' state one-hot: red, yellow, green, unknown
 
 
 def _median(values: np.ndarray) -> float | None:
@@ -50,8 +49,10 @@ def observation_variants(observation, max_distance: float) -> dict:
     GREEN_AHEAD_M ahead in the first light slot. max_distance: the observation's position scale (m)."""
     import jax.numpy as jnp
 
+    from vmax_sim.observation.features import light_row
+
     o = observation
-    green = jnp.zeros(o.lights.shape[-1]).at[0].set(GREEN_AHEAD_M / max_distance).at[2 + GREEN].set(1.0)
+    green = light_row((GREEN_AHEAD_M, 0.0), "green", max_distance)
     return {"no_objects": o.replace(objects_valid=jnp.zeros_like(o.objects_valid)),
             "no_own_past": o.replace(sdc_valid=o.sdc_valid.at[:-1].set(False)),
             "no_map": o.replace(roadgraph_valid=jnp.zeros_like(o.roadgraph_valid)),
@@ -101,17 +102,16 @@ def drive(loaded, env_config, teacher_fn, data: str, num_scenarios: int | None, 
                       np.asarray(speed).reshape(-1), np.asarray(live).reshape(-1), np.asarray(sample_std).reshape(-1),
                       np.asarray(variants).reshape(-1, len(VARIANTS))))
 
-    def mean_accel(params, observation, key):
-        return loaded.learner.act(params, jax.tree.map(lambda a: a[None], observation), key, True)[0, 0]
+    def student_accel(params, observation, key, deterministic):
+        return loaded.learner.act(params, jax.tree.map(lambda a: a[None], observation), key, deterministic)[0, 0]
 
     def action_fn(params, state, observation, key):
         slot = sdc_index(state)
         student = loaded.policy.action_fn(params, state, observation, key).data[slot]
-        batched = jax.tree.map(lambda a: a[None], observation)
-        samples = jax.vmap(lambda k: loaded.learner.act(params, batched, k, False)[0, 0])(
+        samples = jax.vmap(lambda k: student_accel(params, observation, k, False))(
             jax.random.split(key, SAMPLES))  # (SAMPLES,) sampled accelerations
         variants = observation_variants(observation, config.obs.max_distance)
-        variant_accel = jnp.stack([mean_accel(params, variants[name], key) for name in VARIANTS])  # (V,)
+        variant_accel = jnp.stack([student_accel(params, variants[name], key, True) for name in VARIANTS])  # (V,)
         teacher = teacher_fn(state)
         traj, t = state.sim_trajectory, state.timestep
         speed = jnp.hypot(traj.vel_x[slot, t], traj.vel_y[slot, t])

@@ -25,7 +25,8 @@ from vmax_sim.observation.config import DEFAULT_OBSERVATION_CONFIG, ObservationC
 NUM_OBJECT_TYPES = 4  # vehicle, pedestrian, cyclist, other (enum 1..4)
 OBJECT_FEATURES = 8 + NUM_OBJECT_TYPES  # x, y, vx, vy, cos, sin, length, width, type one-hot
 ROADGRAPH_FEATURES = 5 + 3  # x, y, dir x, dir y, speed limit, edge / lane / line one-hot
-LIGHT_FEATURES = 2 + 4  # x, y, state one-hot: red, yellow, green, unknown
+LIGHT_STATES = ("red", "yellow", "green", "unknown")  # the order of the lights' state one-hot
+LIGHT_FEATURES = 2 + len(LIGHT_STATES)  # x, y, state one-hot
 
 
 @flax.struct.dataclass
@@ -237,6 +238,13 @@ def apply_noise(key: jax.Array, inputs: ObservationInputs, indices: jnp.ndarray,
         blocks = boxes_overlap(sight[:, None], boxes[None]) & valid_now[None] & (dist[None] < dist[:, None])
         visible = visible & ~jnp.any(blocks, axis=1)
     return inputs.replace(object_xy=xy), visible
+
+
+def light_row(local_xy_m: tuple[float, float], state: str, max_distance: float) -> jnp.ndarray:
+    """One light's features as light_features writes them: at local_xy_m (SDC frame, m) in `state` (one of
+    LIGHT_STATES); max_distance the observation's position scale (m). -> (LIGHT_FEATURES,)"""
+    one_hot = jnp.zeros(len(LIGHT_STATES)).at[LIGHT_STATES.index(state)].set(1.0)
+    return jnp.concatenate([jnp.asarray(local_xy_m, jnp.float32) / max_distance, one_hot])
 
 
 def observed_sdc_speed(sdc: jnp.ndarray) -> jnp.ndarray:
