@@ -183,9 +183,9 @@ def light_features(inputs: ObservationInputs, config: ObservationConfig):
     red = jnp.isin(state, jnp.asarray(DEFAULT_METRICS_CONFIG.red_light_states))
     yellow = jnp.isin(state, jnp.asarray((TL_CAUTION, TL_ARROW_CAUTION, TL_FLASHING_CAUTION)))
     green = jnp.isin(state, jnp.asarray((TL_GO, TL_ARROW_GO)))
-    unknown = ~(red | yellow | green)
+    masks = {"red": red, "yellow": yellow, "green": green, "unknown": ~(red | yellow | green)}
     feats = jnp.concatenate([to_local_points(inputs.light_xy[idx], origin, origin_yaw) / config.max_distance,
-                             jnp.stack([red, yellow, green, unknown], -1).astype(jnp.float32)], -1)
+                             jnp.stack([masks[name] for name in LIGHT_STATES], -1).astype(jnp.float32)], -1)
     valid = jnp.isfinite(neg)
     feats = jnp.where(valid[:, None], feats, 0.0)
     pad = config.num_lights - num
