@@ -13,7 +13,10 @@ SAMPLES actions drawn from its Gaussian at each step, median over the held steps
 averaging two answers there would be wider than where it drives). And what holds it there: at each held step the
 student's mean acceleration again with one part of its observation changed (VARIANTS: the other objects hidden, its
 own past hidden, the map hidden, the route targets hidden, a green light shown ahead), and the share of held steps
-where it would then pull away.
+where it would then pull away. And the other side: the share of steps where the SDC moves and the teacher brakes
+(label < BRAKE) but the student does not (its acceleration above -PULL_AWAY), split by what stands nearest in a
+corridor ahead of the SDC (AHEAD_M long, CORRIDOR_M to each side: nothing, a vehicle, a pedestrian, a cyclist): a
+student that drives on into people its teacher yields to shows here before it fails a whole scene.
 
 Usage: python benchmarks/imitation_gap.py RUN_DIR [--teacher pdm|pdm_state|idm] [--data SHARDS] [--num-scenarios N]
        [--step N] [--json]
@@ -38,6 +41,9 @@ SAMPLES = 32  # actions drawn from the student's Gaussian per step for its sprea
 LABEL_EPS = BCConfig.expert_action_eps  # BC's default: labels are clipped to [-1 + eps, 1 - eps] before atanh
 VARIANTS = ("no_objects", "no_own_past", "no_map", "no_route", "green_ahead")
 GREEN_AHEAD_M = 6.0  # the shown light stands this far ahead of the SDC's centre, on its axis
+BRAKE = -0.2  # a normalised acceleration label below this asks the moving SDC to brake
+AHEAD_M, CORRIDOR_M = 15.0, 3.0  # the box ahead of the SDC's centre in which the nearest object is named
+AHEAD_KINDS = ("nothing", "vehicle", "pedestrian", "cyclist", "other")  # index = the object type enum (0: none)
 
 
 def _median(values: np.ndarray) -> float | None:
@@ -60,17 +66,45 @@ def observation_variants(observation, max_distance: float) -> dict:
             "green_ahead": o.replace(lights=o.lights.at[0].set(green), lights_valid=o.lights_valid.at[0].set(True))}
 
 
+def nearest_ahead_type(x: jnp.ndarray, y: jnp.ndarray, yaw: jnp.ndarray, valid: jnp.ndarray,
+                       object_type: jnp.ndarray, slot) -> jnp.ndarray:
+    """The type enum of the valid object nearest ahead of object `slot` (the SDC): its centre within AHEAD_M along
+    the SDC's heading and CORRIDOR_M to either side; 0 when none. x, y, yaw, valid, object_type (N,) at one step."""
+    dx, dy = x - x[slot], y - y[slot]
+    cos, sin = jnp.cos(yaw[slot]), jnp.sin(yaw[slot])
+    along, across = cos * dx + sin * dy, cos * dy - sin * dx
+    inside = valid & (along > 0.0) & (along < AHEAD_M) & (jnp.abs(across) < CORRIDOR_M)
+    inside = inside & (jnp.arange(x.shape[0]) != slot)
+    nearest = jnp.argmin(jnp.where(inside, along, jnp.inf))
+    return jnp.where(inside.any(), object_type[nearest], 0)
+
+
+def drove_on(student: np.ndarray, teacher: np.ndarray, speed: np.ndarray, ahead_type: np.ndarray) -> dict:
+    """Where the SDC moves and the teacher brakes (label < BRAKE): the share of those steps where the student does
+    not brake (acceleration above -PULL_AWAY), over all of them and by what stands nearest ahead (AHEAD_KINDS),
+    with the number of such steps. (n, A), (n, A), (n,), (n,) int -> {"share", "by_ahead": {kind: [share, steps]}}"""
+    brakes = (speed >= STANDING_MPS) & (teacher[:, 0] < BRAKE)
+    on = brakes & (student[:, 0] > -PULL_AWAY)
+    by_ahead = {}
+    for code, kind in enumerate(AHEAD_KINDS):
+        here = brakes & (ahead_type == code)
+        by_ahead[kind] = [float(on[here].mean()) if here.any() else None, int(here.sum())]
+    return {"share": float(on[brakes].mean()) if brakes.any() else None, "by_ahead": by_ahead}
+
+
 def gap_statistics(student: np.ndarray, teacher: np.ndarray, speed: np.ndarray,
-                   sample_std: np.ndarray | None = None, variant_accel: dict | None = None) -> dict:
+                   sample_std: np.ndarray | None = None, variant_accel: dict | None = None,
+                   ahead_type: np.ndarray | None = None) -> dict:
     """student, teacher (n, A) actions at the same n states, speed (n,) m/s, sample_std (n,) the spread of the
     student's sampled accelerations (or None), variant_accel {VARIANT: (n,) the student's acceleration with that
-    change} (or None) -> the summary (plain floats; None where no step qualifies)."""
+    change} (or None), ahead_type (n,) the type enum nearest ahead (or None) -> the summary (plain floats; None where
+    no step qualifies)."""
     error = student - teacher
     standing = speed < STANDING_MPS
     stuck = standing & (teacher[:, 0] > PULL_AWAY) & (student[:, 0] <= PULL_AWAY)
-    spread = {}
+    spread = {} if ahead_type is None else {"drove_on": drove_on(student, teacher, speed, ahead_type)}
     if sample_std is not None:
-        spread = {"held_sample_std": _median(sample_std[stuck]), "moving_sample_std": _median(sample_std[~standing])}
+        spread.update(held_sample_std=_median(sample_std[stuck]), moving_sample_std=_median(sample_std[~standing]))
     if variant_accel is not None:  # share of the held steps where the changed observation pulls away
         spread["pulls_away_with"] = {name: float((accel[stuck] > PULL_AWAY).mean()) if stuck.any() else None
                                      for name, accel in variant_accel.items()}
@@ -97,10 +131,10 @@ def drive(loaded, env_config, teacher_fn, data: str, num_scenarios: int | None, 
     config = loaded.config
     pairs: list[tuple[np.ndarray, ...]] = []
 
-    def record(student, teacher, speed, live, sample_std, variants):
+    def record(student, teacher, speed, live, sample_std, variants, ahead):
         pairs.append((np.asarray(student).reshape(-1, 2), np.asarray(teacher).reshape(-1, 2),
                       np.asarray(speed).reshape(-1), np.asarray(live).reshape(-1), np.asarray(sample_std).reshape(-1),
-                      np.asarray(variants).reshape(-1, len(VARIANTS))))
+                      np.asarray(variants).reshape(-1, len(VARIANTS)), np.asarray(ahead).reshape(-1)))
 
     def student_accel(params, observation, key, deterministic):
         return loaded.learner.act(params, jax.tree.map(lambda a: a[None], observation), key, deterministic)[0, 0]
@@ -115,15 +149,17 @@ def drive(loaded, env_config, teacher_fn, data: str, num_scenarios: int | None, 
         teacher = teacher_fn(state)
         traj, t = state.sim_trajectory, state.timestep
         speed = jnp.hypot(traj.vel_x[slot, t], traj.vel_y[slot, t])
-        jax.debug.callback(record, student, teacher, speed, traj.valid[slot, t], jnp.std(samples), variant_accel)
+        ahead = nearest_ahead_type(traj.x[:, t], traj.y[:, t], traj.yaw[:, t], traj.valid[:, t],
+                                   state.object_metadata.object_types, slot)
+        jax.debug.callback(record, student, teacher, speed, traj.valid[slot, t], jnp.std(samples), variant_accel, ahead)
         return sdc_action(state, teacher if driver == "teacher" else student)
 
     result = evaluate(Policy(f"{driver}-driven", action_fn, needs_observation=True),
                       data_config(config, data, batch_size=8), env_config=env_config,
                       obs_config=config.obs, num_scenarios=num_scenarios, policy_params=loaded.params)
-    student, teacher, speed, live, sample_std, variants = (np.concatenate(parts) for parts in zip(*pairs))
+    student, teacher, speed, live, sample_std, variants, ahead = (np.concatenate(parts) for parts in zip(*pairs))
     summary = gap_statistics(student[live], teacher[live], speed[live], sample_std[live],
-                             {name: variants[live, i] for i, name in enumerate(VARIANTS)})
+                             {name: variants[live, i] for i, name in enumerate(VARIANTS)}, ahead[live])
     summary["accuracy"] = float(result.summary["accuracy"])
     return summary
 
@@ -165,6 +201,10 @@ def main() -> None:
               f"accuracy {100 * r['accuracy']:.1f}%")
         print("    held steps where it pulls away once changed: " + ", ".join(
             f"{name} {_percent(share)}" for name, share in r["pulls_away_with"].items()))
+        print(f"    moving steps where the teacher brakes and the student does not: {_percent(r['drove_on']['share'])}"
+              " (by what is nearest ahead: " + ", ".join(
+                  f"{kind} {_percent(share)} of {steps}" for kind, (share, steps) in r["drove_on"]["by_ahead"].items())
+              + ")")
 
 
 def _percent(share: float | None) -> str:

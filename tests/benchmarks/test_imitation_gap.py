@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from imitation_gap import gap_statistics, observation_variants  # noqa: E402
+from imitation_gap import AHEAD_KINDS, gap_statistics, nearest_ahead_type, observation_variants  # noqa: E402
 
 
 def test_a_student_that_stays_where_its_teacher_pulls_away_is_counted():
@@ -80,3 +80,34 @@ def test_each_variant_changes_only_its_part_of_the_observation():
     assert np.asarray(green.lights_valid).tolist() == [True, False]
     np.testing.assert_allclose(np.asarray(green.lights[0]), [6.0 / 50.0, 0.0, 0.0, 0.0, 1.0, 0.0])  # green one-hot
     assert np.asarray(green.objects_valid).all() and np.asarray(green.sdc_valid).all()
+
+
+def test_a_student_that_drives_on_where_its_teacher_brakes_is_counted_by_what_is_ahead():
+    # moving steps where the teacher brakes: two with a pedestrian ahead (the student drives on at one), one with a
+    # vehicle ahead (it brakes); a step where the teacher brakes gently and a standing one do not count
+    teacher = np.array([[-0.5, 0.0], [-0.5, 0.0], [-0.3, 0.0], [-0.1, 0.0], [-0.5, 0.0]])
+    student = np.array([[0.02, 0.0], [-0.3, 0.0], [-0.2, 0.0], [0.1, 0.0], [0.1, 0.0]])
+    speed = np.array([1.5, 1.5, 5.0, 5.0, 0.0])
+    ahead = np.array([2, 2, 1, 0, 2])
+    stats = gap_statistics(student, teacher, speed, ahead_type=ahead)["drove_on"]
+    assert stats["share"] == pytest.approx(1 / 3)
+    assert stats["by_ahead"]["pedestrian"] == [0.5, 2]
+    assert stats["by_ahead"]["vehicle"] == [0.0, 1]
+    assert stats["by_ahead"]["nothing"] == [None, 0]
+    assert set(stats["by_ahead"]) == set(AHEAD_KINDS)
+    assert "drove_on" not in gap_statistics(student, teacher, speed)
+
+
+def test_the_object_named_ahead_is_the_nearest_in_the_corridor_along_the_heading():
+    import jax.numpy as jnp
+
+    # the SDC (slot 0) at the origin heading +y: a pedestrian 4 m ahead, a vehicle 8 m ahead, a cyclist 2 m to the
+    # side (outside the corridor), a vehicle behind and an invalid one 1 m ahead
+    x = jnp.array([0.0, 0.5, -0.5, 6.0, 0.0, 0.0])
+    y = jnp.array([0.0, 4.0, 8.0, 2.0, -5.0, 1.0])
+    yaw = jnp.full(6, jnp.pi / 2)
+    valid = jnp.array([True, True, True, True, True, False])
+    types = jnp.array([1, 2, 1, 3, 1, 1])
+    assert int(nearest_ahead_type(x, y, yaw, valid, types, 0)) == 2
+    assert int(nearest_ahead_type(x, y, yaw, valid.at[1].set(False), types, 0)) == 1
+    assert int(nearest_ahead_type(x, y, yaw, valid.at[1:3].set(False), types, 0)) == 0
