@@ -1,6 +1,6 @@
 """`SyntheticKnobs`: randomisation knobs of the synthetic generator (traffic density, tracking noise, lane
 widths, speed limits, driver styles, parked cars, where they park and how far they reach towards the lanes, how
-the SDC starts, topology mix).
+the SDC starts, how junction lights are phased, topology mix).
 
 The defaults reproduce the generator exactly (same arrays, same random stream), so a source or a cache made
 with default knobs is the one made before the knobs existed. Every knob widens or shifts a draw the
@@ -37,6 +37,12 @@ class SyntheticKnobs:
     # chance that each side of each junction arm has a kerbside parking strip (real streets are lined with
     # parked cars up to the junction; the generator's junctions had none)
     junction_parking: float = 0.0
+    # chance that a signalised four-way junction releases opposite approaches together (two phases, turns across the
+    # oncoming lanes permitted, the junction's reservations ordering the crossings) instead of one approach at a time:
+    # real traffic crosses close in front of a car that drives on green (a left turner, a late crosser), which the
+    # split phases never show (measured with the blind teacher driving: 0.2% of its moving steps with a vehicle
+    # crossing in the corridor ahead, 5.9% on the real scenes)
+    paired_signals: float = 0.0
     # range of the metres each parked car stands nearer the lanes than its spot's centre (drawn per car, and cut
     # so that every vehicle the log drives past it keeps traffic.PARKED_CLEARANCE_M): real kerbside cars
     # reach towards the lane (a real route passes parked cars' centres at 1.5-2.5 m; the spots' centres are ~3 m
@@ -72,6 +78,7 @@ class SyntheticKnobs:
             raise ValueError(f"synthetic knob max_parked: expected a whole number from 0 to 48, "
                              f"got {self.max_parked!r}")
         _check_number("junction_parking", self.junction_parking, 0.0, 1.0)
+        _check_number("paired_signals", self.paired_signals, 0.0, 1.0)
         _check_range("parked_reach", self.parked_reach, 0.0, 2.0)
         _check_range("walkers_per_crosswalk", self.walkers_per_crosswalk, 0.0, 12.0)
         _check_number("sdc_slow_start", self.sdc_slow_start, 0.0, 1.0)

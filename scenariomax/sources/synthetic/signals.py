@@ -1,7 +1,8 @@
-"""Fixed-time signal plans: one phase per approach (split phasing), then a pedestrian-only phase.
+"""Fixed-time signal plans: one phase per light group, then a pedestrian-only phase.
 
-Split phasing means movements released together never cross each other, so the junction stays
-safe; the reservation logic in `traffic` catches anything a phase change leaves inside.
+A group is one approach (split phasing: movements released together never cross each other) or, with the
+`paired_signals` knob, two opposite approaches (their turns cross the oncoming lanes). Either way the reservation
+logic in `traffic` orders whatever crosses inside the junction, including anything a phase change leaves there.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from scenariomax.schema import TL_CAUTION, TL_GO, TL_STOP
 
 @dataclasses.dataclass(frozen=True)
 class SignalPlan:
-    num_groups: int  # one group per junction approach
+    num_groups: int  # light groups: one per junction approach, or one per pair of opposite approaches
     green_s: float  # green time per approach
     yellow_s: float
     all_red_s: float  # clearance after each yellow

@@ -152,6 +152,11 @@ def _junction(rng: np.random.Generator, topology: str, arm_angles: list[float], 
             along = normal if rng.random() < 0.5 else -normal
             b.add_crosswalk(centre, along, 2 * half, CROSSWALK_WIDTH_M, is_signalised=control == "signal")
         arms.append((angle, outgoing, incoming))
+    # one light group per approach (split phasing), or opposite approaches together (paired): drawn only when the
+    # knob is on, so the default generator's random stream is unchanged
+    paired = control == "signal" and len(arms) == 4 and knobs.paired_signals > 0 \
+        and bool(rng.random() < knobs.paired_signals)
+    num_groups = 2 if paired else len(arms)
     for a, (angle_a, _, incoming) in enumerate(arms):
         heading_in = angle_a + np.pi
         moves = []  # (entry lane index, exit arm, exit lane index)
@@ -175,16 +180,17 @@ def _junction(rng: np.random.Generator, topology: str, arm_angles: list[float], 
         for lane in incoming:
             draft = b.draft(lane)
             if control == "signal":
-                draft.signal_group = a
+                draft.signal_group = a % num_groups
             else:
                 draft.has_stop_sign = True
     if control == "signal":
-        b.signal_plan = random_plan(rng, len(arms), has_crosswalks=bool(b.crosswalks))
+        b.signal_plan = random_plan(rng, num_groups, has_crosswalks=bool(b.crosswalks))
     return _world(b, rng, knobs)
 
 
 def build_intersection4(rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> RoadNetwork:
-    """Four-way junction, signalised (split phasing + pedestrian phase) or all-way stop."""
+    """Four-way junction, signalised (split or, with the `paired_signals` knob, paired phasing + pedestrian phase) or
+    all-way stop."""
     base = 0.0
     control = "signal" if rng.random() < 0.8 else "stop"
     return _junction(rng, "intersection4", [base, base + np.pi / 2, base + np.pi, base + 1.5 * np.pi], control,

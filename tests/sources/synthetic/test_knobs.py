@@ -234,6 +234,17 @@ def test_walkers_per_crosswalk_sets_how_many_cross():
     assert all(n >= 6 for n in crowded) and sum(crowded) > 2 * sum(pedestrians((0.0, 2.0)))
 
 
+def test_paired_signals_release_opposite_approaches_together():
+    def light_sequences(knobs):  # distinct state sequences of the lights of each signalised four-way junction
+        scenes = (generate_scenario(4, i, SIZES, topology="intersection4", knobs=knobs) for i in range(8))
+        return [len({tuple(row) for row in s.tl_state[s.tl_valid.any(axis=1)]}) for s in scenes if s.tl_valid.any()]
+
+    split, paired = light_sequences(SyntheticKnobs()), light_sequences(SyntheticKnobs(paired_signals=1.0))
+    assert len(paired) == len(split) >= 3
+    assert max(split) >= 3  # one group per approach: more than two sequences show within the 9.1 s
+    assert max(paired) == 2  # two groups: the opposite approaches share their lights
+
+
 def test_sdc_slow_start_chooses_sdcs_nearly_at_rest():
     def slow_share(chance):
         scenarios = [generate_scenario(9, i, SIZES, knobs=SyntheticKnobs(sdc_slow_start=chance)) for i in range(30)]
@@ -264,7 +275,8 @@ def test_driver_style_spread_widens_the_traits_around_their_centres():
     ({"topology_weights": "spaghetti:1"}, "topology_weights"), ({"topology_weights": "merge:0"}, "topology_weights"),
     ({"topology_weights": "merge:x"}, "topology_weights"),
     ({"max_parked": 2.5}, "max_parked"), ({"max_parked": 99}, "max_parked"), ({"max_parked": True}, "max_parked"),
-    ({"junction_parking": 1.5}, "junction_parking"), ({"parked_reach": (0.0, 2.5)}, "parked_reach"),
+    ({"junction_parking": 1.5}, "junction_parking"), ({"paired_signals": -0.1}, "paired_signals"),
+    ({"parked_reach": (0.0, 2.5)}, "parked_reach"),
     ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"),
     ({"sdc_slow_start": -0.1}, "sdc_slow_start"),
 ])
@@ -344,6 +356,7 @@ def test_convert_command_rejects_bad_knobs_in_one_line(tmp_path, args, words):
                    walkers_per_crosswalk=(8.0, 12.0)),
     SyntheticKnobs(junction_parking=1.0, max_parked=48, parked_fraction=(1.0, 1.0), parked_reach=(2.0, 2.0),
                    traffic_density=3.0),
+    SyntheticKnobs(paired_signals=1.0, traffic_density=3.0, walkers_per_crosswalk=(3.0, 6.0)),
 ])
 def test_extreme_knobs_keep_the_logs_safe(knobs):
     """At the knobs' limits vehicles still never overlap nor run a red light, and the scenarios validate."""
