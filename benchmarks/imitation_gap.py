@@ -102,13 +102,13 @@ def gap_statistics(student: np.ndarray, teacher: np.ndarray, speed: np.ndarray,
     error = student - teacher
     standing = speed < STANDING_MPS
     stuck = standing & (teacher[:, 0] > PULL_AWAY) & (student[:, 0] <= PULL_AWAY)
-    spread = {} if ahead_type is None else {"drove_on": drove_on(student, teacher, speed, ahead_type)}
+    optional = {} if ahead_type is None else {"drove_on": drove_on(student, teacher, speed, ahead_type)}
     if sample_std is not None:
-        spread.update(held_sample_std=_median(sample_std[stuck]), moving_sample_std=_median(sample_std[~standing]))
+        optional.update(held_sample_std=_median(sample_std[stuck]), moving_sample_std=_median(sample_std[~standing]))
     if variant_accel is not None:  # share of the held steps where the changed observation pulls away
-        spread["pulls_away_with"] = {name: float((accel[stuck] > PULL_AWAY).mean()) if stuck.any() else None
+        optional["pulls_away_with"] = {name: float((accel[stuck] > PULL_AWAY).mean()) if stuck.any() else None
                                      for name, accel in variant_accel.items()}
-    return {**spread, "steps": int(len(error)),
+    return {**optional, "steps": int(len(error)),
             "mae_accel": float(np.abs(error[:, 0]).mean()), "mae_steer": float(np.abs(error[:, 1]).mean()),
             "bias_accel": float(error[:, 0].mean()), "bias_steer": float(error[:, 1].mean()),
             "standing_share": float(standing.mean()),

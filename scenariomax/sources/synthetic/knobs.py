@@ -40,8 +40,8 @@ class SyntheticKnobs:
     # chance that a signalised four-way junction releases opposite approaches together (two phases, turns across the
     # oncoming lanes permitted, the junction's reservations ordering the crossings) instead of one approach at a time:
     # real traffic crosses close in front of a car that drives on green (a left turner, a late crosser), which the
-    # split phases never show (measured with the blind teacher driving: 0.2% of its moving steps with a vehicle
-    # crossing in the corridor ahead, 5.9% on the real scenes)
+    # split phases never show (the blind teacher driving has a vehicle crossing the corridor ahead at 0.2% of its
+    # moving steps, 5.9% on real scenes; with every four-way junction paired 0.37%: docs/learning.md, session 46)
     paired_signals: float = 0.0
     # range of the metres each parked car stands nearer the lanes than its spot's centre (drawn per car, and cut
     # so that every vehicle the log drives past it keeps traffic.PARKED_CLEARANCE_M): real kerbside cars
