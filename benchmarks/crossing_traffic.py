@@ -1,0 +1,86 @@
+"""How often something crosses close in front of the logged SDC while it moves: synthetic scenes against real ones.
+
+For every shard glob given, over the logged SDC's steps from the current step on where it moves (>= 0.5 m/s): the
+share with a vehicle crossing the corridor ahead (the nearest object within AHEAD_M along the SDC's heading and
+CORRIDOR_M to either side is a vehicle heading 45-135 degrees off the SDC's, above CROSSING_MPS) and the share with a
+pedestrian there, and how many scenes have a crossing at all. A student learns to brake for what its training shows:
+real recordings had 0.75% crossing steps, 300 synthetic scenes of the bc-dagger knobs 0.25% (docs/learning.md,
+session 46).
+
+Usage: python benchmarks/crossing_traffic.py SHARDS [SHARDS ...] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+MOVING_MPS = 0.5  # the SDC counts as moving from this speed
+AHEAD_M, CORRIDOR_M = 15.0, 3.0  # the box ahead of the SDC's centre in which the nearest object is named
+CROSSING_COS = np.cos(np.radians(45.0))  # a heading this far off the SDC's (either way) crosses its path
+CROSSING_MPS = 2.0  # a crossing vehicle moves at least this fast
+VEHICLE, PEDESTRIAN = 1, 2  # object type enums
+
+
+def crossing_steps(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, speed: np.ndarray, valid: np.ndarray,
+                   object_type: np.ndarray, sdc: int, start: int) -> tuple[int, int, int]:
+    """(moving steps, of them with a crossing vehicle nearest ahead, with a pedestrian nearest ahead) of object `sdc`
+    from step `start` on. x, y, yaw, speed, valid (N, T); object_type (N,)."""
+    steps = np.arange(start, x.shape[1])
+    moving = steps[valid[sdc, steps] & (speed[sdc, steps] >= MOVING_MPS)]  # (m,)
+    if moving.size == 0:
+        return 0, 0, 0
+    cos, sin = np.cos(yaw[sdc, moving]), np.sin(yaw[sdc, moving])  # (m,)
+    dx, dy = x[:, moving] - x[sdc, moving], y[:, moving] - y[sdc, moving]  # (N, m)
+    along, across = cos * dx + sin * dy, cos * dy - sin * dx
+    inside = valid[:, moving] & (along > 0.0) & (along < AHEAD_M) & (np.abs(across) < CORRIDOR_M)
+    inside[sdc] = False
+    nearest = np.argmin(np.where(inside, along, np.inf), axis=0)  # (m,)
+    found = inside.any(axis=0)
+    kind = np.where(found, object_type[nearest], 0)
+    off_heading = np.abs(np.cos(yaw[nearest, moving] - yaw[sdc, moving])) < CROSSING_COS
+    crossing = (kind == VEHICLE) & off_heading & (speed[nearest, moving] > CROSSING_MPS)
+    return int(moving.size), int(crossing.sum()), int((kind == PEDESTRIAN).sum())
+
+
+def shard_statistics(path: str) -> dict:
+    """The shares over every scenario of the shards at `path` (a file, folder or glob)."""
+    from scenariomax.shards import read_shards
+
+    scenes = moving = crossing = pedestrian = with_crossing = 0
+    for scenario in read_shards(path):
+        speed = np.hypot(scenario.velocity_x, scenario.velocity_y)
+        m, c, p = crossing_steps(scenario.x, scenario.y, scenario.bbox_yaw, speed, scenario.valid,
+                                 scenario.object_type, scenario.sdc_index, scenario.current_time_index)
+        scenes, moving, crossing, pedestrian = scenes + 1, moving + m, crossing + c, pedestrian + p
+        with_crossing += c > 0
+    def share(count: int) -> float | None:
+        return count / moving if moving else None
+
+    return {"data": path, "scenes": scenes, "moving_steps": moving, "crossing_share": share(crossing),
+            "pedestrian_share": share(pedestrian), "scenes_with_crossing": with_crossing}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("shards", nargs="+")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    rows = [shard_statistics(path) for path in args.shards]
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return
+    for r in rows:
+        print(f"{r['data']}: {r['scenes']} scenes, {r['moving_steps']} moving SDC steps; a vehicle crossing ahead at "
+              f"{_percent(r['crossing_share'])} of them, a pedestrian ahead at {_percent(r['pedestrian_share'])}; "
+              f"{r['scenes_with_crossing']} scenes with a crossing")
+
+
+def _percent(share: float | None) -> str:
+    return "-" if share is None else f"{100 * share:.2f}%"
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,45 @@
+"""benchmarks/crossing_traffic.py: what counts as something crossing close in front of the moving SDC."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+from crossing_traffic import crossing_steps  # noqa: E402
+
+
+def _scene():
+    # the SDC (object 0) drives along +x at 5 m/s for 6 steps; object 1 a vehicle crossing (+y) 8 m ahead at 6 m/s
+    # at steps 2-3 only; object 2 a pedestrian 4 m ahead at step 4; object 3 a vehicle ahead driving the same way
+    steps = 6
+    x, y, yaw, speed = (np.zeros((4, steps)) for _ in range(4))
+    valid = np.zeros((4, steps), bool)
+    x[0], speed[0], valid[0] = np.arange(steps) * 0.5, 5.0, True
+    x[1, 2:4], yaw[1], speed[1], valid[1, 2:4] = x[0, 2:4] + 8.0, np.pi / 2, 6.0, True
+    x[2, 4], yaw[2], speed[2], valid[2, 4] = x[0, 4] + 4.0, np.pi / 2, 1.2, True
+    x[3], speed[3], valid[3] = x[0] + 12.0, 5.0, True
+    return x, y, yaw, speed, valid, np.array([1, 1, 2, 1])
+
+
+def test_a_vehicle_crossing_nearest_ahead_counts_and_one_driving_the_same_way_does_not():
+    x, y, yaw, speed, valid, types = _scene()
+    assert crossing_steps(x, y, yaw, speed, valid, types, sdc=0, start=0) == (6, 2, 1)
+
+
+def test_only_moving_steps_from_the_current_step_on_count():
+    x, y, yaw, speed, valid, types = _scene()
+    assert crossing_steps(x, y, yaw, speed, valid, types, sdc=0, start=3) == (3, 1, 1)
+    speed[0, 2] = 0.2  # standing at step 2: not counted, its crossing neither
+    assert crossing_steps(x, y, yaw, speed, valid, types, sdc=0, start=0) == (5, 1, 1)
+
+
+def test_a_slow_or_distant_crossing_vehicle_does_not_count():
+    x, y, yaw, speed, valid, types = _scene()
+    speed[1] = 1.0  # rolling across below 2 m/s
+    assert crossing_steps(x, y, yaw, speed, valid, types, sdc=0, start=0)[1] == 0
+    x, y, yaw, speed, valid, types = _scene()
+    y[1] = 4.0  # 4 m to the side: outside the corridor
+    assert crossing_steps(x, y, yaw, speed, valid, types, sdc=0, start=0)[1] == 0
