@@ -24,6 +24,18 @@ CROSSING_MPS = 2.0  # a crossing vehicle moves at least this fast
 VEHICLE, PEDESTRIAN = 1, 2  # object type enums
 
 
+def nearest_ahead(x, y, yaw, valid, sdc, xp=np):
+    """The object nearest ahead of object `sdc`: its centre within AHEAD_M along the SDC's heading and CORRIDOR_M to
+    either side. x, y, yaw, valid (N, ...) -> its index (...) and whether there is one (...). `xp`: numpy, or
+    jax.numpy inside a traced function (benchmarks/imitation_gap.py)."""
+    cos, sin = xp.cos(yaw[sdc]), xp.sin(yaw[sdc])
+    dx, dy = x - x[sdc], y - y[sdc]
+    along, across = cos * dx + sin * dy, cos * dy - sin * dx
+    others = (xp.arange(x.shape[0]) != sdc).reshape((-1,) + (1,) * (x.ndim - 1))
+    inside = valid & others & (along > 0.0) & (along < AHEAD_M) & (xp.abs(across) < CORRIDOR_M)
+    return xp.argmin(xp.where(inside, along, xp.inf), axis=0), inside.any(axis=0)
+
+
 def crossing_steps(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, speed: np.ndarray, valid: np.ndarray,
                    object_type: np.ndarray, sdc: int, start: int) -> tuple[int, int, int]:
     """(moving steps, of them with a crossing vehicle nearest ahead, with a pedestrian nearest ahead) of object `sdc`
@@ -32,13 +44,7 @@ def crossing_steps(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, speed: np.ndar
     moving = steps[valid[sdc, steps] & (speed[sdc, steps] >= MOVING_MPS)]  # (m,)
     if moving.size == 0:
         return 0, 0, 0
-    cos, sin = np.cos(yaw[sdc, moving]), np.sin(yaw[sdc, moving])  # (m,)
-    dx, dy = x[:, moving] - x[sdc, moving], y[:, moving] - y[sdc, moving]  # (N, m)
-    along, across = cos * dx + sin * dy, cos * dy - sin * dx
-    inside = valid[:, moving] & (along > 0.0) & (along < AHEAD_M) & (np.abs(across) < CORRIDOR_M)
-    inside[sdc] = False
-    nearest = np.argmin(np.where(inside, along, np.inf), axis=0)  # (m,)
-    found = inside.any(axis=0)
+    nearest, found = nearest_ahead(x[:, moving], y[:, moving], yaw[:, moving], valid[:, moving], sdc)  # (m,), (m,)
     kind = np.where(found, object_type[nearest], 0)
     off_heading = np.abs(np.cos(yaw[nearest, moving] - yaw[sdc, moving])) < CROSSING_COS
     crossing = (kind == VEHICLE) & off_heading & (speed[nearest, moving] > CROSSING_MPS)
@@ -56,6 +62,7 @@ def shard_statistics(path: str) -> dict:
                                  scenario.object_type, scenario.sdc_index, scenario.current_time_index)
         scenes, moving, crossing, pedestrian = scenes + 1, moving + m, crossing + c, pedestrian + p
         with_crossing += c > 0
+
     def share(count: int) -> float | None:
         return count / moving if moving else None
 

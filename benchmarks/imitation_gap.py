@@ -15,7 +15,8 @@ student's mean acceleration again with one part of its observation changed (VARI
 own past hidden, the map hidden, the route targets hidden, a green light shown ahead), and the share of held steps
 where it would then pull away. And the other side: the share of steps where the SDC moves and the teacher brakes
 (label < BRAKE) but the student does not (its acceleration above -PULL_AWAY), split by what stands nearest in a
-corridor ahead of the SDC (AHEAD_M long, CORRIDOR_M to each side: nothing, a vehicle, a pedestrian, a cyclist): a
+corridor ahead of the SDC (crossing_traffic.nearest_ahead: 15 m long, 3 m to each side; nothing, a vehicle, a
+pedestrian, a cyclist): a
 student that drives on into people its teacher yields to shows here before it fails a whole scene.
 
 Usage: python benchmarks/imitation_gap.py RUN_DIR [--teacher pdm|pdm_state|idm] [--data SHARDS] [--num-scenarios N]
@@ -31,6 +32,7 @@ import json
 import jax
 import jax.numpy as jnp
 import numpy as np
+from crossing_traffic import nearest_ahead  # the same corridor (this folder is on the path of its scripts)
 
 from vmax_sim.agents.bc.config import BCConfig
 
@@ -42,7 +44,6 @@ LABEL_EPS = BCConfig.expert_action_eps  # BC's default: labels are clipped to [-
 VARIANTS = ("no_objects", "no_own_past", "no_map", "no_route", "green_ahead")
 GREEN_AHEAD_M = 6.0  # the shown light stands this far ahead of the SDC's centre, on its axis
 BRAKE = -0.2  # a normalised acceleration label below this asks the moving SDC to brake
-AHEAD_M, CORRIDOR_M = 15.0, 3.0  # the box ahead of the SDC's centre in which the nearest object is named
 AHEAD_KINDS = ("nothing", "vehicle", "pedestrian", "cyclist", "other")  # index = the object type enum (0: none)
 
 
@@ -68,15 +69,10 @@ def observation_variants(observation, max_distance: float) -> dict:
 
 def nearest_ahead_type(x: jnp.ndarray, y: jnp.ndarray, yaw: jnp.ndarray, valid: jnp.ndarray,
                        object_type: jnp.ndarray, slot) -> jnp.ndarray:
-    """The type enum of the valid object nearest ahead of object `slot` (the SDC): its centre within AHEAD_M along
-    the SDC's heading and CORRIDOR_M to either side; 0 when none. x, y, yaw, valid, object_type (N,) at one step."""
-    dx, dy = x - x[slot], y - y[slot]
-    cos, sin = jnp.cos(yaw[slot]), jnp.sin(yaw[slot])
-    along, across = cos * dx + sin * dy, cos * dy - sin * dx
-    inside = valid & (along > 0.0) & (along < AHEAD_M) & (jnp.abs(across) < CORRIDOR_M)
-    inside = inside & (jnp.arange(x.shape[0]) != slot)
-    nearest = jnp.argmin(jnp.where(inside, along, jnp.inf))
-    return jnp.where(inside.any(), object_type[nearest], 0)
+    """The type enum of the object nearest ahead of object `slot` (the SDC) in crossing_traffic's corridor; 0 when
+    none. x, y, yaw, valid, object_type (N,) at one step."""
+    nearest, found = nearest_ahead(x, y, yaw, valid, slot, jnp)
+    return jnp.where(found, object_type[nearest], 0)
 
 
 def drove_on(student: np.ndarray, teacher: np.ndarray, speed: np.ndarray, ahead_type: np.ndarray) -> dict:
