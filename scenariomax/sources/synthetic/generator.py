@@ -50,13 +50,16 @@ def generate_scenario(seed: int, index: int, sizes: Sizes | None = None, topolog
 
 
 SLOW_START_MPS = 2.0  # `sdc_slow_start`: a candidate this slow at the current step starts nearly at rest
+# `sdc_waits`: a candidate that stands (below STANDING_MPS) for WAIT_STEPS of the steps from the current one on waits
+STANDING_MPS, WAIT_STEPS = 0.5, 30
 
 
 def _choose_sdc(network: RoadNetwork, traffic: Traffic, rng: np.random.Generator, sizes: Sizes,
                 knobs: SyntheticKnobs = DEFAULT_KNOBS) -> int | None:
     """A car valid at every step that moves, never passes a red stop point and, where the map
     has junction or merge lanes, drives through one during the episode; with the `sdc_slow_start` knob's
-    chance, one of those nearly at rest at the current step (when there is one)."""
+    chance, one of those nearly at rest at the current step (when there is one), and with the `sdc_waits` knob's, one
+    that stands for 3 s or more of the episode (at a light, a stop, in a queue)."""
     is_car = (traffic.object_type == OBJECT_TYPE_VEHICLE) & ~traffic.is_parked & (traffic.length < 5.5)
     candidates = np.flatnonzero(is_car & traffic.valid.all(axis=1) & (traffic.speed.max(axis=1) > 3.0))
     if len(candidates) == 0:
@@ -71,6 +74,10 @@ def _choose_sdc(network: RoadNetwork, traffic: Traffic, rng: np.random.Generator
     if knobs.sdc_slow_start > 0 and rng.random() < knobs.sdc_slow_start:
         slow = [c for c in clean if traffic.speed[c, sizes.current_time_index] < SLOW_START_MPS]
         pool = [c for c in slow if c in through] or slow or pool
+    if knobs.sdc_waits > 0 and rng.random() < knobs.sdc_waits:
+        standing = (traffic.speed[:, sizes.current_time_index:] < STANDING_MPS).sum(axis=1)
+        waiting = [c for c in clean if standing[c] >= WAIT_STEPS]
+        pool = [c for c in waiting if c in through] or waiting or pool
     return int(pool[int(rng.integers(len(pool)))])
 
 

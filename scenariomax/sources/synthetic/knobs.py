@@ -54,6 +54,10 @@ class SyntheticKnobs:
     # chance that the SDC is chosen among the candidates nearly at rest (< 2 m/s) at the current step, when there
     # are any (a queue or a light about to turn; a quarter to a half of real WOMD / nuScenes scenes start so)
     sdc_slow_start: float = 0.0
+    # chance that the SDC is chosen among the candidates that stand for 3 s or more from the current step on (at a red,
+    # a stop sign, in a queue) when there are any: real logged SDCs stand for a third of their steps, the generator's
+    # for a tenth, and a driver that cannot see the light learns what to do there only where it stands
+    sdc_waits: float = 0.0
     topology_weights: str = ""  # "intersection4:2,merge:1": relative weights (others 0); "" the default mix
 
     def __post_init__(self) -> None:
@@ -82,6 +86,7 @@ class SyntheticKnobs:
         _check_range("parked_reach", self.parked_reach, 0.0, 2.0)
         _check_range("walkers_per_crosswalk", self.walkers_per_crosswalk, 0.0, 12.0)
         _check_number("sdc_slow_start", self.sdc_slow_start, 0.0, 1.0)
+        _check_number("sdc_waits", self.sdc_waits, 0.0, 1.0)
         if not isinstance(self.topology_weights, str):
             raise ValueError(f"synthetic knob topology_weights: expected text like 'intersection4:2,merge:1', "
                              f"got {self.topology_weights!r}")

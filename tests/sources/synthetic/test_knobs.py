@@ -253,6 +253,16 @@ def test_sdc_slow_start_chooses_sdcs_nearly_at_rest():
     assert slow_share(1.0) >= slow_share(0.0) + 0.1
 
 
+def test_sdc_waits_chooses_sdcs_that_stand_for_seconds():
+    def standing_steps(chance):  # per scene: the SDC's steps below 0.5 m/s from the current step on
+        scenarios = [generate_scenario(9, i, SIZES, knobs=SyntheticKnobs(sdc_waits=chance)) for i in range(30)]
+        return np.array([(s.speed[s.sdc_index, s.current_time_index:] < 0.5).sum() for s in scenarios])
+
+    usual, waiting = standing_steps(0.0), standing_steps(1.0)
+    assert waiting.mean() >= 2 * usual.mean() + 5  # the generator's SDCs stand ~7 of 81 steps, the real ones ~26
+    assert (waiting >= 30).mean() >= 0.5  # most scenes have one that waits 3 s (not every map has such a car)
+
+
 def test_driver_style_spread_widens_the_traits_around_their_centres():
     def traits(spread):
         rng, knobs = np.random.default_rng(0), SyntheticKnobs(driver_style_spread=spread)
@@ -278,7 +288,7 @@ def test_driver_style_spread_widens_the_traits_around_their_centres():
     ({"junction_parking": 1.5}, "junction_parking"), ({"paired_signals": -0.1}, "paired_signals"),
     ({"parked_reach": (0.0, 2.5)}, "parked_reach"),
     ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"),
-    ({"sdc_slow_start": -0.1}, "sdc_slow_start"),
+    ({"sdc_slow_start": -0.1}, "sdc_slow_start"), ({"sdc_waits": 1.5}, "sdc_waits"),
 ])
 def test_bad_knobs_raise_one_line_naming_the_knob(kwargs, name):
     with pytest.raises(ValueError, match=name) as caught:
@@ -357,6 +367,7 @@ def test_convert_command_rejects_bad_knobs_in_one_line(tmp_path, args, words):
     SyntheticKnobs(junction_parking=1.0, max_parked=48, parked_fraction=(1.0, 1.0), parked_reach=(2.0, 2.0),
                    traffic_density=3.0),
     SyntheticKnobs(paired_signals=1.0, traffic_density=3.0, walkers_per_crosswalk=(3.0, 6.0)),
+    SyntheticKnobs(sdc_waits=1.0, sdc_slow_start=1.0, traffic_density=3.0),
 ])
 def test_extreme_knobs_keep_the_logs_safe(knobs):
     """At the knobs' limits vehicles still never overlap nor run a red light, and the scenarios validate."""
