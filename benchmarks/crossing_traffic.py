@@ -3,9 +3,11 @@
 For every shard glob given, over the logged SDC's steps from the current step on where it moves (>= 0.5 m/s): the
 share with a vehicle crossing the corridor ahead (the nearest object within AHEAD_M along the SDC's heading and
 CORRIDOR_M to either side is a vehicle heading 45-135 degrees off the SDC's, above CROSSING_MPS) and the share with a
-pedestrian there, and how many scenes have a crossing at all. A student learns to brake for what its training shows:
+pedestrian there, and how many scenes have a crossing at all; and the share of its steps where it stands (below
+MOVING_MPS: at a light, a stop, in a queue). A student learns to brake for, and to wait at, what its training shows:
 real recordings had 0.75% crossing steps, 300 synthetic scenes of the bc-dagger knobs 0.25% (docs/learning.md,
-session 46).
+session 46); real logged SDCs stand at about a third of their steps, those of the bc-dagger knobs at a tenth (session
+47, the `sdc_waits` knob).
 
 Usage: python benchmarks/crossing_traffic.py SHARDS [SHARDS ...] [--json]
 """
@@ -51,23 +53,32 @@ def crossing_steps(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, speed: np.ndar
     return int(moving.size), int(crossing.sum()), int((kind == PEDESTRIAN).sum())
 
 
+def standing_steps(speed: np.ndarray, valid: np.ndarray, sdc: int, start: int) -> tuple[int, int]:
+    """(valid steps, of them standing) of object `sdc` from step `start` on. speed, valid (N, T)."""
+    steps = valid[sdc, start:]
+    return int(steps.sum()), int((steps & (speed[sdc, start:] < MOVING_MPS)).sum())
+
+
 def shard_statistics(path: str) -> dict:
     """The shares over every scenario of the shards at `path` (a file, folder or glob)."""
     from scenariomax.shards import read_shards
 
-    scenes = moving = crossing = pedestrian = with_crossing = 0
+    scenes = moving = crossing = pedestrian = with_crossing = steps = standing = 0
     for scenario in read_shards(path):
         speed = np.hypot(scenario.velocity_x, scenario.velocity_y)
         m, c, p = crossing_steps(scenario.x, scenario.y, scenario.bbox_yaw, speed, scenario.valid,
                                  scenario.object_type, scenario.sdc_index, scenario.current_time_index)
         scenes, moving, crossing, pedestrian = scenes + 1, moving + m, crossing + c, pedestrian + p
+        n, n_standing = standing_steps(speed, scenario.valid, scenario.sdc_index, scenario.current_time_index)
+        steps, standing = steps + n, standing + n_standing
         with_crossing += c > 0
 
     def share(count: int) -> float | None:
         return count / moving if moving else None
 
     return {"data": path, "scenes": scenes, "moving_steps": moving, "crossing_share": share(crossing),
-            "pedestrian_share": share(pedestrian), "scenes_with_crossing": with_crossing}
+            "pedestrian_share": share(pedestrian), "scenes_with_crossing": with_crossing,
+            "standing_share": standing / steps if steps else None}
 
 
 def main() -> None:
@@ -82,7 +93,8 @@ def main() -> None:
     for r in rows:
         print(f"{r['data']}: {r['scenes']} scenes, {r['moving_steps']} moving SDC steps; a vehicle crossing ahead at "
               f"{_percent(r['crossing_share'])} of them, a pedestrian ahead at {_percent(r['pedestrian_share'])}; "
-              f"{r['scenes_with_crossing']} scenes with a crossing")
+              f"{r['scenes_with_crossing']} scenes with a crossing; the SDC stands at "
+              f"{_percent(r['standing_share'])} of its steps")
 
 
 def _percent(share: float | None) -> str:

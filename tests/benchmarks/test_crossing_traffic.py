@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from crossing_traffic import crossing_steps  # noqa: E402
+from crossing_traffic import crossing_steps, standing_steps  # noqa: E402
 
 
 def _scene():
@@ -43,3 +43,11 @@ def test_a_slow_or_distant_crossing_vehicle_does_not_count():
     x, y, yaw, speed, valid, types = _scene()
     y[1] = 4.0  # 4 m to the side: outside the corridor
     assert crossing_steps(x, y, yaw, speed, valid, types, sdc=0, start=0)[1] == 0
+
+
+def test_standing_counts_the_valid_steps_below_walking_pace_from_the_current_step_on():
+    x, y, yaw, speed, valid, types = _scene()
+    speed[0, [1, 4]] = 0.2
+    valid[0, 5] = False
+    assert standing_steps(speed, valid, sdc=0, start=0) == (5, 2)
+    assert standing_steps(speed, valid, sdc=0, start=2) == (3, 1)
