@@ -23,7 +23,7 @@ from vmax_sim.data import scenarios_to_batch
 from vmax_sim.env import EnvConfig
 from vmax_sim.env.learning import LearningEnv
 from vmax_sim.policies.traffic import idm_traffic
-from vmax_sim.training.run import TRAFFIC_DRIVERS
+from vmax_sim.training.run import TRAFFIC_DRIVERS, TRAFFIC_SEES_SDC_COS
 
 ENV = LearningEnv(EnvConfig(max_num_objects=8))
 
@@ -140,9 +140,10 @@ def follower_scenario():
 
 
 @pytest.mark.slow  # ~100 s on 2 cores (two env compilations): the default suite stays under 10 minutes
-@pytest.mark.parametrize("traffic", ["log", "idm", "idm_pass"])
+@pytest.mark.parametrize("traffic", ["log", "idm", "idm_pass", "idm_follow"])
 def test_idm_traffic_brakes_for_a_braking_learner_that_log_traffic_rear_ends(traffic):
-    env = LearningEnv(EnvConfig(max_num_objects=8), traffic=TRAFFIC_DRIVERS[traffic])
+    env = LearningEnv(EnvConfig(max_num_objects=8), traffic=TRAFFIC_DRIVERS[traffic],
+                      traffic_sees_sdc_cos=TRAFFIC_SEES_SDC_COS.get(traffic))
     pool = scenarios_to_batch([follower_scenario()], small_data_config("", include_agent_paths=True))
 
     def brake_to_a_stop(state):  # straight on, braking at up to 6 m/s^2 until it stands (the model would reverse)
@@ -170,6 +171,23 @@ def test_idm_traffic_brakes_for_a_braking_learner_that_log_traffic_rear_ends(tra
         sdc_x, follower_x = np.asarray(xs).T
         assert follower_x[-1] + 2.25 < sdc_x[-1] - 2.25 - 1.0  # its front bumper > 1 m behind the SDC's rear one
         assert np.diff(follower_x)[-1] < 0.5 * np.diff(follower_x)[0]  # at well under half its speed
+
+
+def test_idm_follow_traffic_sees_the_learner_only_while_it_drives_their_way():
+    """`train.traffic=idm_follow`: the follower brakes for the SDC ahead on its way, but one that turns across it is
+    invisible to it (it crosses or meets it as its log does, as evaluation's replayed traffic)."""
+    from vmax_sim.env.agent_view import sdc_seen_only_the_same_way
+
+    state = jax.tree.map(lambda a: a[0], scenarios_to_batch([follower_scenario()],
+                                                            small_data_config("", include_agent_paths=True)))
+    cos = TRAFFIC_SEES_SDC_COS["idm_follow"]
+    t = int(state.timestep)
+    seen = sdc_seen_only_the_same_way(state, 1, cos).sim_trajectory.valid
+    assert bool(seen[0, t]) and bool(jnp.all(seen == state.sim_trajectory.valid))
+    sim = state.sim_trajectory
+    across = state.replace(sim_trajectory=sim.replace(yaw=sim.yaw.at[0].set(sim.yaw[0] + np.pi / 2)))
+    hidden = sdc_seen_only_the_same_way(across, 1, cos).sim_trajectory.valid
+    assert not bool(jnp.any(hidden[0])) and bool(jnp.all(hidden[1] == sim.valid[1]))
 
 
 def test_idm_traffic_needs_the_agents_paths():

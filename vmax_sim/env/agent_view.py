@@ -108,13 +108,30 @@ def stop_sign_points(state: SimulatorState, max_points: int = MAX_STOP_SIGN_POIN
     return kept.replace(valid=is_sign[index])
 
 
+def sdc_seen_only_the_same_way(state: SimulatorState, slot: jax.Array, min_cos: float) -> SimulatorState:
+    """The state in which the SDC is invisible (invalid) to the agent in `slot` unless their headings differ by less
+    than arccos(min_cos): an agent then brakes for an SDC ahead of it on its way, but crosses or meets one as its
+    log does."""
+    sim, sdc, t = state.sim_trajectory, sdc_index(state), state.timestep
+    same_way = jnp.cos(sim.yaw[slot, t] - sim.yaw[sdc, t]) >= min_cos
+    return state.replace(sim_trajectory=sim.replace(valid=sim.valid.at[sdc].set(sim.valid[sdc] & same_way)))
+
+
 def agents_action(state: SimulatorState, slots: jax.Array, slot_valid: jax.Array, agent_fn: AgentFn, params,
-                  key: jax.Array, action_dim: int, roadgraph: RoadgraphPoints | None = None) -> Action:
+                  key: jax.Array, action_dim: int, roadgraph: RoadgraphPoints | None = None,
+                  sdc_seen_cos: float | None = None) -> Action:
     """Actions of the agents in `slots` (K,) (where slot_valid) from `agent_fn` on their views (`agent_view`,
-    with `roadgraph` in them when given); every other row is zero and invalid. -> Action (N, action_dim)."""
+    with `roadgraph` in them when given); every other row is zero and invalid. sdc_seen_cos: each agent sees the
+    SDC only while heading within that cosine of it (`sdc_seen_only_the_same_way`); None: always.
+    -> Action (N, action_dim)."""
     num = state.num_objects
     keys = jax.random.split(key, slots.shape[0])
-    data, valid = jax.vmap(lambda slot, k: agent_fn(params, agent_view(state, slot, roadgraph), k))(slots, keys)
+
+    def view(slot):
+        seen = state if sdc_seen_cos is None else sdc_seen_only_the_same_way(state, slot, sdc_seen_cos)
+        return agent_view(seen, slot, roadgraph)
+
+    data, valid = jax.vmap(lambda slot, k: agent_fn(params, view(slot), k))(slots, keys)
     target = jnp.where(slot_valid, slots, num)  # out of range: dropped by the scatter
     full = jnp.zeros((num, action_dim), jnp.float32).at[target].set(data.astype(jnp.float32), mode="drop")
     full_valid = jnp.zeros((num, 1), bool).at[target, 0].set(valid & slot_valid, mode="drop")

@@ -112,6 +112,9 @@ class LearningEnv:
     # agents' driver (`vmax_sim.policies.traffic.idm_traffic`); the env floor cannot import the planners
     traffic: Callable[[Environment], AgentFn] | None = None
     traffic_agents: int = 8  # with traffic: at most this many agents are driven, the rest replay the log
+    # with traffic: the agents see the SDC only while heading within this cosine of it (they follow a learner that
+    # brakes, and cross or meet it as their log does, as evaluation's replayed traffic does); None: always
+    traffic_sees_sdc_cos: float | None = None
     # who labels the SDC's steps (StepOutput.expert_action, what BC imitates): None (the log-following action) or
     # a factory (core Environment) -> the teacher, one state -> (A,) in [-1, 1] (`vmax_sim.policies.teacher`)
     teacher: Callable[[Environment], Callable[[SimulatorState], jax.Array]] | None = None
@@ -164,7 +167,7 @@ class LearningEnv:
         if traffic is None:
             return full
         others = agents_action(sim, traffic.slots, traffic.valid, self._agent_fn, None, key, self.action_dim,
-                               traffic.signs)
+                               traffic.signs, self.traffic_sees_sdc_cos)
         return sdc_and_agents_action(sim, full, others)
 
     def _expert(self, sim: SimulatorState) -> jax.Array:

@@ -62,7 +62,8 @@ class TrainDataConfig:
             raise ValueError(f"data.hide_lights_from must be one of {HIDE_LIGHTS_FROM}, got {self.hide_lights_from!r}")
 
 
-TRAFFIC_CHOICES = ("log", "idm", "idm_pass")  # train.traffic: who drives the objects other than the SDC while training
+# train.traffic: who drives the objects other than the SDC while training
+TRAFFIC_CHOICES = ("log", "idm", "idm_pass", "idm_follow")
 TEACHER_CHOICES = ("log", "idm", "pdm", "pdm_state")  # train.teacher: whose actions label BC's (and BC+SAC's) steps
 
 
@@ -101,7 +102,10 @@ class LoopConfig:
     # traffic_agents controllable agents nearest the SDC follow their own paths with IDM, never ahead of their
     # logged position: a follower brakes for a learner that brakes); "idm_pass": the same agents passing a car at
     # rest beside their lane with 0.2 m to spare instead of queueing behind it (for data.synthetic.parked_reach
-    # and real kerbsides). Evaluation stays non-reactive.
+    # and real kerbsides); "idm_follow": the idm agents, which brake for the learner only while it drives their way
+    # (within 45 degrees): behind a learner that brakes they still brake, but they cross or meet it as their log
+    # does, as evaluation's replayed traffic, instead of yielding to a learner that pushes across their way.
+    # Evaluation stays non-reactive.
     traffic: str = "log"
     traffic_agents: int = 8
     # whose action labels each step for the algorithms that imitate (bc, bc_sac): "log" (the log-following

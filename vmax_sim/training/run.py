@@ -114,7 +114,8 @@ def components(config: TrainConfig):
     else:
         env = LearningEnv(config.env, config.obs, config.reward, expert_labels=config.imitates,
                           action_repeat=action_repeat(config), traffic=TRAFFIC_DRIVERS[config.train.traffic],
-                          traffic_agents=config.train.traffic_agents, teacher=teacher_of(config))
+                          traffic_agents=config.train.traffic_agents, teacher=teacher_of(config),
+                          traffic_sees_sdc_cos=TRAFFIC_SEES_SDC_COS.get(config.train.traffic))
     return env, build_learner(config, env)
 
 
@@ -129,7 +130,10 @@ def teacher_of(config: TrainConfig):
 
 # train.traffic -> LearningEnv.traffic (None: the log)
 TRAFFIC_DRIVERS = {"log": None, "idm": idm_traffic,
-                   "idm_pass": functools.partial(idm_traffic, standing_clearance=TRAFFIC_STANDING_CLEARANCE_M)}
+                   "idm_pass": functools.partial(idm_traffic, standing_clearance=TRAFFIC_STANDING_CLEARANCE_M),
+                   "idm_follow": idm_traffic}
+# train.traffic -> LearningEnv.traffic_sees_sdc_cos (absent: the agents always see the learner)
+TRAFFIC_SEES_SDC_COS = {"idm_follow": math.cos(math.radians(45.0))}
 # train.teacher -> LearningEnv.teacher (None: the log-following action)
 TEACHERS = {"log": None, "idm": idm_teacher, "pdm": pdm_teacher, "pdm_state": pdm_state_teacher}
 
