@@ -23,6 +23,7 @@ from scenariomax.sources.synthetic import (
     overlapping_vehicle_pairs,
     red_light_crossings,
 )
+from scenariomax.sources.synthetic.generator import STANDING_MPS, WAIT_STEPS
 from scenariomax.sources.synthetic.knobs import TOPOLOGY_NAMES
 
 SIZES = Sizes(num_objects=64)
@@ -254,13 +255,13 @@ def test_sdc_slow_start_chooses_sdcs_nearly_at_rest():
 
 
 def test_sdc_waits_chooses_sdcs_that_stand_for_seconds():
-    def standing_steps(chance):  # per scene: the SDC's steps below 0.5 m/s from the current step on
+    def standing_steps(chance):  # per scene: the SDC's steps below walking pace from the current step on
         scenarios = [generate_scenario(9, i, SIZES, knobs=SyntheticKnobs(sdc_waits=chance)) for i in range(30)]
-        return np.array([(s.speed[s.sdc_index, s.current_time_index:] < 0.5).sum() for s in scenarios])
+        return np.array([(s.speed[s.sdc_index, s.current_time_index:] < STANDING_MPS).sum() for s in scenarios])
 
     usual, waiting = standing_steps(0.0), standing_steps(1.0)
     assert waiting.mean() >= 2 * usual.mean() + 5  # the generator's SDCs stand ~7 of 81 steps, the real ones ~26
-    assert (waiting >= 30).mean() >= 0.5  # most scenes have one that waits 3 s (not every map has such a car)
+    assert (waiting >= WAIT_STEPS).mean() >= 0.5  # most scenes have one that waits 3 s (not every map has such a car)
 
 
 def test_driver_style_spread_widens_the_traits_around_their_centres():
