@@ -59,10 +59,17 @@ VEHICLE_TRAITS: tuple[tuple[tuple[float, float], tuple[float, float]], ...] = (
 )
 
 
+# `slow_vehicles`: the desired speed of a driver who crawls, as a share of the limit (1-4 m/s at 10-14 m/s limits)
+SLOW_SPEED_FACTOR: tuple[float, float] = (0.1, 0.3)
+
+
 def vehicle_driver(rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> Driver:
     draws = [float(rng.uniform(*drawn)) for drawn, _ in VEHICLE_TRAITS]
-    return Driver(*(knobs.spread(draw, sum(drawn) / 2, limits)
-                    for draw, (drawn, limits) in zip(draws, VEHICLE_TRAITS)))
+    driver = Driver(*(knobs.spread(draw, sum(drawn) / 2, limits)
+                      for draw, (drawn, limits) in zip(draws, VEHICLE_TRAITS)))
+    if knobs.slow_vehicles > 0 and rng.random() < knobs.slow_vehicles:  # no draw when off: the default stream stays
+        driver = dataclasses.replace(driver, speed_factor=float(rng.uniform(*SLOW_SPEED_FACTOR)))
+    return driver
 
 
 def cyclist_driver(rng: np.random.Generator, speed_limit: float) -> Driver:

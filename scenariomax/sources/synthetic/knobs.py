@@ -1,10 +1,10 @@
 """`SyntheticKnobs`: randomisation knobs of the synthetic generator (traffic density, tracking noise, lane
 widths, speed limits, driver styles, parked cars, where they park and how far they reach towards the lanes, how
-the SDC starts, how junction lights are phased, topology mix).
+the SDC starts, how junction lights are phased, slow drivers, topology mix).
 
 The defaults reproduce the generator exactly (same arrays, same random stream), so a source or a cache made
 with default knobs is the one made before the knobs existed. Every knob widens or shifts a draw the
-generator makes anyway; only the tracking noise draws extra numbers, after everything else and only when on.
+generator makes anyway; only the tracking noise and the slow drivers draw extra numbers, and only when on.
 """
 
 from __future__ import annotations
@@ -58,6 +58,11 @@ class SyntheticKnobs:
     # a stop sign, in a queue) when there are any: real logged SDCs stand for a third of their steps, the generator's
     # for a tenth, and a driver that cannot see the light learns what to do there only where it stands
     sdc_waits: float = 0.0
+    # chance that a vehicle's driver crawls, wanting only SLOW_SPEED_FACTOR of the limit (a driver looking for a spot
+    # or an address, a delivery van, a learner): real SDCs close on leaders at 1-3 m/s where the limit is 10+ m/s and
+    # must brake for them well ahead; the generator's drivers want 85-110% of the limit, so the only slow leaders
+    # are queues at lights. Drawn after the driver's other traits, only when on
+    slow_vehicles: float = 0.0
     topology_weights: str = ""  # "intersection4:2,merge:1": relative weights (others 0); "" the default mix
 
     def __post_init__(self) -> None:
@@ -87,6 +92,7 @@ class SyntheticKnobs:
         _check_range("walkers_per_crosswalk", self.walkers_per_crosswalk, 0.0, 12.0)
         _check_number("sdc_slow_start", self.sdc_slow_start, 0.0, 1.0)
         _check_number("sdc_waits", self.sdc_waits, 0.0, 1.0)
+        _check_number("slow_vehicles", self.slow_vehicles, 0.0, 1.0)
         if not isinstance(self.topology_weights, str):
             raise ValueError(f"synthetic knob topology_weights: expected text like 'intersection4:2,merge:1', "
                              f"got {self.topology_weights!r}")

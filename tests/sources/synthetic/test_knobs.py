@@ -264,6 +264,23 @@ def test_sdc_waits_chooses_sdcs_that_stand_for_seconds():
     assert (waiting >= WAIT_STEPS).mean() >= 0.5  # most scenes have one that waits 3 s (not every map has such a car)
 
 
+def test_slow_vehicles_puts_crawling_leaders_on_the_road():
+    def crawlers(chance):  # per scene: moving vehicles (not the SDC) whose fastest logged speed stays under 4.5 m/s
+        counts = []
+        for i in range(20):
+            s = generate_scenario(9, i, SIZES, knobs=SyntheticKnobs(slow_vehicles=chance, traffic_density=1.5))
+            top = np.where(s.valid, s.speed, 0.0).max(axis=1)
+            moving = (s.object_type == OBJECT_TYPE_VEHICLE) & ~s.is_sdc & (top > 1.0)
+            counts.append(int((moving & (top < 4.5)).sum()))
+        return np.array(counts)
+
+    usual, slow = crawlers(0.0), crawlers(0.3)
+    assert slow.sum() >= usual.sum() + 20 and (slow > 0).mean() >= 0.5
+    rng, knobs = np.random.default_rng(0), SyntheticKnobs(slow_vehicles=1.0)
+    factors = [agents.vehicle_driver(rng, knobs).speed_factor for _ in range(100)]
+    assert agents.SLOW_SPEED_FACTOR[0] <= min(factors) and max(factors) <= agents.SLOW_SPEED_FACTOR[1]
+
+
 def test_driver_style_spread_widens_the_traits_around_their_centres():
     def traits(spread):
         rng, knobs = np.random.default_rng(0), SyntheticKnobs(driver_style_spread=spread)
@@ -290,6 +307,7 @@ def test_driver_style_spread_widens_the_traits_around_their_centres():
     ({"parked_reach": (0.0, 2.5)}, "parked_reach"),
     ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"),
     ({"sdc_slow_start": -0.1}, "sdc_slow_start"), ({"sdc_waits": 1.5}, "sdc_waits"),
+    ({"slow_vehicles": 2.0}, "slow_vehicles"),
 ])
 def test_bad_knobs_raise_one_line_naming_the_knob(kwargs, name):
     with pytest.raises(ValueError, match=name) as caught:
@@ -369,6 +387,7 @@ def test_convert_command_rejects_bad_knobs_in_one_line(tmp_path, args, words):
                    traffic_density=3.0),
     SyntheticKnobs(paired_signals=1.0, traffic_density=3.0, walkers_per_crosswalk=(3.0, 6.0)),
     SyntheticKnobs(sdc_waits=1.0, sdc_slow_start=1.0, traffic_density=3.0),
+    SyntheticKnobs(slow_vehicles=1.0, traffic_density=3.0, sdc_slow_start=1.0),
 ])
 def test_extreme_knobs_keep_the_logs_safe(knobs):
     """At the knobs' limits vehicles still never overlap nor run a red light, and the scenarios validate."""
