@@ -7,7 +7,8 @@ pedestrian there, and how many scenes have a crossing at all; and the share of i
 MOVING_MPS: at a light, a stop, in a queue). A student learns to brake for, and to wait at, what its training shows:
 real recordings had 0.75% crossing steps, 300 synthetic scenes of the bc-dagger knobs 0.25% (docs/learning.md,
 session 46); real logged SDCs stand at about a third of their steps, those of the bc-dagger knobs at a tenth (session
-47, the `sdc_waits` knob).
+47, the `sdc_waits` knob); and the share of its moving steps behind a slow leader (the nearest object ahead a vehicle
+going its way at MOVING_MPS to SLOW_LEADER_MPS: a crawler, a queue moving off; session 48, the `slow_vehicles` knob).
 
 Usage: python benchmarks/crossing_traffic.py SHARDS [SHARDS ...] [--json]
 """
@@ -23,6 +24,7 @@ MOVING_MPS = 0.5  # the SDC counts as moving from this speed
 AHEAD_M, CORRIDOR_M = 15.0, 3.0  # the box ahead of the SDC's centre in which the nearest object is named
 CROSSING_COS = np.cos(np.radians(45.0))  # a heading this far off the SDC's (either way) crosses its path
 CROSSING_MPS = 2.0  # a crossing vehicle moves at least this fast
+SLOW_LEADER_MPS = 4.0  # a leader going the SDC's way below this (and moving) is a slow one
 VEHICLE, PEDESTRIAN = 1, 2  # object type enums
 
 
@@ -53,6 +55,23 @@ def crossing_steps(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, speed: np.ndar
     return int(moving.size), int(crossing.sum()), int((kind == PEDESTRIAN).sum())
 
 
+def slow_leader_steps(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, speed: np.ndarray, valid: np.ndarray,
+                      object_type: np.ndarray, sdc: int, start: int) -> int:
+    """Of the moving steps of object `sdc` from step `start` on, those whose nearest object ahead is a vehicle
+    heading within 45 degrees of the SDC's and moving slowly (MOVING_MPS to SLOW_LEADER_MPS). Arrays as
+    crossing_steps."""
+    steps = np.arange(start, x.shape[1])
+    moving = steps[valid[sdc, steps] & (speed[sdc, steps] >= MOVING_MPS)]  # (m,)
+    if moving.size == 0:
+        return 0
+    nearest, found = nearest_ahead(x[:, moving], y[:, moving], yaw[:, moving], valid[:, moving], sdc)  # (m,), (m,)
+    same_way = np.cos(yaw[nearest, moving] - yaw[sdc, moving]) > CROSSING_COS
+    lead_speed = speed[nearest, moving]
+    slow = found & (object_type[nearest] == VEHICLE) & same_way & (lead_speed >= MOVING_MPS) \
+        & (lead_speed < SLOW_LEADER_MPS)
+    return int(slow.sum())
+
+
 def standing_steps(speed: np.ndarray, valid: np.ndarray, sdc: int, start: int) -> tuple[int, int]:
     """(valid steps, of them standing) of object `sdc` from step `start` on. speed, valid (N, T)."""
     steps = valid[sdc, start:]
@@ -63,7 +82,7 @@ def shard_statistics(path: str) -> dict:
     """The shares over every scenario of the shards at `path` (a file, folder or glob)."""
     from scenariomax.shards import read_shards
 
-    scenes = moving = crossing = pedestrian = with_crossing = steps = standing = 0
+    scenes = moving = crossing = pedestrian = with_crossing = steps = standing = slow = 0
     for scenario in read_shards(path):
         speed = np.hypot(scenario.velocity_x, scenario.velocity_y)
         m, c, p = crossing_steps(scenario.x, scenario.y, scenario.bbox_yaw, speed, scenario.valid,
@@ -72,13 +91,15 @@ def shard_statistics(path: str) -> dict:
         n, n_standing = standing_steps(speed, scenario.valid, scenario.sdc_index, scenario.current_time_index)
         steps, standing = steps + n, standing + n_standing
         with_crossing += c > 0
+        slow += slow_leader_steps(scenario.x, scenario.y, scenario.bbox_yaw, speed, scenario.valid,
+                                  scenario.object_type, scenario.sdc_index, scenario.current_time_index)
 
     def share(count: int) -> float | None:
         return count / moving if moving else None
 
     return {"data": path, "scenes": scenes, "moving_steps": moving, "crossing_share": share(crossing),
             "pedestrian_share": share(pedestrian), "scenes_with_crossing": with_crossing,
-            "standing_share": standing / steps if steps else None}
+            "standing_share": standing / steps if steps else None, "slow_leader_share": share(slow)}
 
 
 def main() -> None:
@@ -94,7 +115,8 @@ def main() -> None:
         print(f"{r['data']}: {r['scenes']} scenes, {r['moving_steps']} moving SDC steps; a vehicle crossing ahead at "
               f"{_percent(r['crossing_share'])} of them, a pedestrian ahead at {_percent(r['pedestrian_share'])}; "
               f"{r['scenes_with_crossing']} scenes with a crossing; the SDC stands at "
-              f"{_percent(r['standing_share'])} of its steps")
+              f"{_percent(r['standing_share'])} of its steps; behind a slow leader at "
+              f"{_percent(r['slow_leader_share'])} of its moving steps")
 
 
 def _percent(share: float | None) -> str:

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from crossing_traffic import crossing_steps, standing_steps  # noqa: E402
+from crossing_traffic import crossing_steps, slow_leader_steps, standing_steps  # noqa: E402
 
 
 def _scene():
@@ -51,3 +51,14 @@ def test_standing_counts_the_valid_steps_below_walking_pace_from_the_current_ste
     valid[0, 5] = False
     assert standing_steps(speed, valid, sdc=0, start=0) == (5, 2)
     assert standing_steps(speed, valid, sdc=0, start=2) == (3, 1)
+
+
+def test_a_slow_vehicle_going_the_sdcs_way_nearest_ahead_is_a_slow_leader():
+    x, y, yaw, speed, valid, types = _scene()
+    assert slow_leader_steps(x, y, yaw, speed, valid, types, sdc=0, start=0) == 0  # the leader keeps 5 m/s
+    speed[3, 1:] = 2.0  # it crawls from step 1 on; at steps 2-4 the crossing car and the pedestrian are nearer
+    assert slow_leader_steps(x, y, yaw, speed, valid, types, sdc=0, start=0) == 2
+    speed[3, 1:] = 0.2  # standing: a queue, not a slow leader
+    assert slow_leader_steps(x, y, yaw, speed, valid, types, sdc=0, start=0) == 0
+    speed[3], yaw[3] = 2.0, np.pi  # oncoming
+    assert slow_leader_steps(x, y, yaw, speed, valid, types, sdc=0, start=0) == 0
