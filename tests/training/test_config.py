@@ -69,6 +69,8 @@ def test_idm_traffic_is_a_training_option_that_self_play_refuses():
     passing, _ = components(apply_overrides(config, ["train.traffic=idm_pass"]))
     assert passing.traffic.func is idm_traffic and passing.traffic.keywords["standing_clearance"] > 0
     assert train_data_config(apply_overrides(config, ["train.traffic=idm_pass"]), "shards", 0).include_agent_paths
+    both, _ = components(apply_overrides(config, ["train.traffic=idm_follow_pass"]))  # passing, and blind across
+    assert both.traffic.keywords["standing_clearance"] > 0 and 0 < both.traffic_sees_sdc_cos < 1
     assert train_data_config(config, "shards", 0).include_agent_paths  # the agents' own routes are loaded
     assert not train_data_config(preset_config("bc-mlp"), "shards", 0).include_agent_paths
     with pytest.raises(ValueError, match="choose one"):

@@ -140,7 +140,7 @@ def follower_scenario():
 
 
 @pytest.mark.slow  # ~100 s on 2 cores (two env compilations): the default suite stays under 10 minutes
-@pytest.mark.parametrize("traffic", ["log", "idm", "idm_pass", "idm_follow"])
+@pytest.mark.parametrize("traffic", ["log", "idm", "idm_pass", "idm_follow", "idm_follow_pass"])
 def test_idm_traffic_brakes_for_a_braking_learner_that_log_traffic_rear_ends(traffic):
     env = LearningEnv(EnvConfig(max_num_objects=8), traffic=TRAFFIC_DRIVERS[traffic],
                       traffic_sees_sdc_cos=TRAFFIC_SEES_SDC_COS.get(traffic))

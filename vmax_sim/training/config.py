@@ -63,7 +63,7 @@ class TrainDataConfig:
 
 
 # train.traffic: who drives the objects other than the SDC while training
-TRAFFIC_CHOICES = ("log", "idm", "idm_pass", "idm_follow")
+TRAFFIC_CHOICES = ("log", "idm", "idm_pass", "idm_follow", "idm_follow_pass")
 TEACHER_CHOICES = ("log", "idm", "pdm", "pdm_state")  # train.teacher: whose actions label BC's (and BC+SAC's) steps
 
 
@@ -104,8 +104,8 @@ class LoopConfig:
     # rest beside their lane with 0.2 m to spare instead of queueing behind it (for data.synthetic.parked_reach
     # and real kerbsides); "idm_follow": the idm agents, which brake for the learner only while it drives their way
     # (within 45 degrees): behind a learner that brakes they still brake, but they cross or meet it as their log
-    # does, as evaluation's replayed traffic, instead of yielding to a learner that pushes across their way.
-    # Evaluation stays non-reactive.
+    # does, as evaluation's replayed traffic, instead of yielding to a learner that pushes across their way;
+    # "idm_follow_pass": idm_follow agents that pass cars at rest as idm_pass does. Evaluation stays non-reactive.
     traffic: str = "log"
     traffic_agents: int = 8
     # whose action labels each step for the algorithms that imitate (bc, bc_sac): "log" (the log-following

@@ -129,11 +129,11 @@ def teacher_of(config: TrainConfig):
 
 
 # train.traffic -> LearningEnv.traffic (None: the log)
-TRAFFIC_DRIVERS = {"log": None, "idm": idm_traffic,
-                   "idm_pass": functools.partial(idm_traffic, standing_clearance=TRAFFIC_STANDING_CLEARANCE_M),
-                   "idm_follow": idm_traffic}
+_PASSING_IDM = functools.partial(idm_traffic, standing_clearance=TRAFFIC_STANDING_CLEARANCE_M)
+TRAFFIC_DRIVERS = {"log": None, "idm": idm_traffic, "idm_pass": _PASSING_IDM, "idm_follow": idm_traffic,
+                   "idm_follow_pass": _PASSING_IDM}
 # train.traffic -> LearningEnv.traffic_sees_sdc_cos (absent: the agents always see the learner)
-TRAFFIC_SEES_SDC_COS = {"idm_follow": math.cos(math.radians(45.0))}
+TRAFFIC_SEES_SDC_COS = dict.fromkeys(("idm_follow", "idm_follow_pass"), math.cos(math.radians(45.0)))
 # train.teacher -> LearningEnv.teacher (None: the log-following action)
 TEACHERS = {"log": None, "idm": idm_teacher, "pdm": pdm_teacher, "pdm_state": pdm_state_teacher}
 
