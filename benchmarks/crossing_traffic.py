@@ -8,7 +8,9 @@ MOVING_MPS: at a light, a stop, in a queue). A student learns to brake for, and 
 real recordings had 0.75% crossing steps, 300 synthetic scenes of the bc-dagger knobs 0.25% (docs/learning.md,
 session 46); real logged SDCs stand at about a third of their steps, those of the bc-dagger knobs at a tenth (session
 47, the `sdc_waits` knob); and the share of its moving steps behind a slow leader (the nearest object ahead a vehicle
-going its way at MOVING_MPS to SLOW_LEADER_MPS: a crawler, a queue moving off; session 48, the `slow_vehicles` knob).
+going its way at MOVING_MPS to SLOW_LEADER_MPS: a crawler, a queue moving off; session 48, the `slow_vehicles` knob);
+and how many parked vehicles (never above MOVING_MPS) it passes with less than CLOSE_PASS_M between the boxes, per
+scene (real 0.16, the bc-dagger knobs 0, `parked_reach=0:1.5` 0.30; session 48).
 
 Usage: python benchmarks/crossing_traffic.py SHARDS [SHARDS ...] [--json]
 """
@@ -24,6 +26,8 @@ MOVING_MPS = 0.5  # the SDC counts as moving from this speed
 AHEAD_M, CORRIDOR_M = 15.0, 3.0  # the box ahead of the SDC's centre in which the nearest object is named
 CROSSING_COS = np.cos(np.radians(45.0))  # a heading this far off the SDC's (either way) crosses its path
 CROSSING_MPS = 2.0  # a crossing vehicle moves at least this fast
+CLOSE_PASS_M = 1.0  # a parked vehicle whose box comes this near the SDC's is passed close
+NEAR_M = 8.0  # only steps with the centres this near are measured (a box gap needs the centres within ~6 m)
 SLOW_LEADER_MPS = 4.0  # a leader going the SDC's way below this (and moving) is a slow one
 VEHICLE, PEDESTRIAN = 1, 2  # object type enums
 
@@ -72,6 +76,32 @@ def slow_leader_steps(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, speed: np.n
     return int(slow.sum())
 
 
+def _box(x: float, y: float, yaw: float, length: float, width: float):
+    from shapely.geometry import Polygon
+
+    c, s = np.cos(yaw), np.sin(yaw)
+    return Polygon([(x + a * c - b * s, y + a * s + b * c)
+                    for a, b in ((length / 2, width / 2), (length / 2, -width / 2), (-length / 2, -width / 2),
+                                 (-length / 2, width / 2))])
+
+
+def close_parked_passes(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, speed: np.ndarray, valid: np.ndarray,
+                        object_type: np.ndarray, length: np.ndarray, width: np.ndarray, sdc: int, start: int) -> int:
+    """How many parked vehicles (valid, never above MOVING_MPS) object `sdc` passes from step `start` on with less
+    than CLOSE_PASS_M between the two boxes. Arrays (N, T) as crossing_steps; length, width (N, T)."""
+    steps = np.flatnonzero(valid[sdc, start:]) + start
+    parked = (object_type == VEHICLE) & valid.any(axis=1) & (np.where(valid, speed, 0.0).max(axis=1) <= MOVING_MPS)
+    parked[sdc] = False
+    count = 0
+    for other in np.flatnonzero(parked):
+        near = steps[valid[other, steps] & (np.hypot(x[other, steps] - x[sdc, steps],
+                                                     y[other, steps] - y[sdc, steps]) < NEAR_M)]
+        count += any(_box(x[sdc, t], y[sdc, t], yaw[sdc, t], length[sdc, t], width[sdc, t]).distance(
+            _box(x[other, t], y[other, t], yaw[other, t], length[other, t], width[other, t])) < CLOSE_PASS_M
+            for t in near)
+    return count
+
+
 def standing_steps(speed: np.ndarray, valid: np.ndarray, sdc: int, start: int) -> tuple[int, int]:
     """(valid steps, of them standing) of object `sdc` from step `start` on. speed, valid (N, T)."""
     steps = valid[sdc, start:]
@@ -82,7 +112,7 @@ def shard_statistics(path: str) -> dict:
     """The shares over every scenario of the shards at `path` (a file, folder or glob)."""
     from scenariomax.shards import read_shards
 
-    scenes = moving = crossing = pedestrian = with_crossing = steps = standing = slow = 0
+    scenes = moving = crossing = pedestrian = with_crossing = steps = standing = slow = close = 0
     for scenario in read_shards(path):
         speed = np.hypot(scenario.velocity_x, scenario.velocity_y)
         m, c, p = crossing_steps(scenario.x, scenario.y, scenario.bbox_yaw, speed, scenario.valid,
@@ -93,13 +123,17 @@ def shard_statistics(path: str) -> dict:
         with_crossing += c > 0
         slow += slow_leader_steps(scenario.x, scenario.y, scenario.bbox_yaw, speed, scenario.valid,
                                   scenario.object_type, scenario.sdc_index, scenario.current_time_index)
+        close += close_parked_passes(scenario.x, scenario.y, scenario.bbox_yaw, speed, scenario.valid,
+                                     scenario.object_type, scenario.length, scenario.width, scenario.sdc_index,
+                                     scenario.current_time_index)
 
     def share(count: int) -> float | None:
         return count / moving if moving else None
 
     return {"data": path, "scenes": scenes, "moving_steps": moving, "crossing_share": share(crossing),
             "pedestrian_share": share(pedestrian), "scenes_with_crossing": with_crossing,
-            "standing_share": standing / steps if steps else None, "slow_leader_share": share(slow)}
+            "standing_share": standing / steps if steps else None, "slow_leader_share": share(slow),
+            "close_parked_passes_per_scene": close / scenes if scenes else None}
 
 
 def main() -> None:
@@ -116,7 +150,12 @@ def main() -> None:
               f"{_percent(r['crossing_share'])} of them, a pedestrian ahead at {_percent(r['pedestrian_share'])}; "
               f"{r['scenes_with_crossing']} scenes with a crossing; the SDC stands at "
               f"{_percent(r['standing_share'])} of its steps; behind a slow leader at "
-              f"{_percent(r['slow_leader_share'])} of its moving steps")
+              f"{_percent(r['slow_leader_share'])} of its moving steps; parked cars passed within {CLOSE_PASS_M:g} m: "
+              f"{_per_scene(r['close_parked_passes_per_scene'])} per scene")
+
+
+def _per_scene(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f}"
 
 
 def _percent(share: float | None) -> str:

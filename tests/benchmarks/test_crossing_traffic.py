@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from crossing_traffic import crossing_steps, slow_leader_steps, standing_steps  # noqa: E402
+from crossing_traffic import close_parked_passes, crossing_steps, slow_leader_steps, standing_steps  # noqa: E402
 
 
 def _scene():
@@ -62,3 +62,14 @@ def test_a_slow_vehicle_going_the_sdcs_way_nearest_ahead_is_a_slow_leader():
     assert slow_leader_steps(x, y, yaw, speed, valid, types, sdc=0, start=0) == 0
     speed[3], yaw[3] = 2.0, np.pi  # oncoming
     assert slow_leader_steps(x, y, yaw, speed, valid, types, sdc=0, start=0) == 0
+
+
+def test_a_parked_car_passed_with_less_than_a_metre_between_the_boxes_counts_once():
+    x, y, yaw, speed, valid, types = _scene()
+    length, width = np.full(x.shape, 4.5), np.full(x.shape, 2.0)
+    x[3], y[3], speed[3] = 1.0, -2.6, 0.0  # parked beside the SDC's start: 0.6 m between the boxes
+    assert close_parked_passes(x, y, yaw, speed, valid, types, length, width, sdc=0, start=0) == 1
+    y[3] = -3.2  # 1.2 m: not close
+    assert close_parked_passes(x, y, yaw, speed, valid, types, length, width, sdc=0, start=0) == 0
+    y[3], speed[3, 5] = -2.6, 3.0  # it drives off at the end: not parked
+    assert close_parked_passes(x, y, yaw, speed, valid, types, length, width, sdc=0, start=0) == 0
