@@ -6,6 +6,8 @@ Everything random is drawn from `np.random.default_rng([seed, index])`, so a (se
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from scenariomax.enrich.budget import fit_to_budget
@@ -13,6 +15,7 @@ from scenariomax.enrich.roadgraph import LaneLinks, lane_graph_arrays, polylines
 from scenariomax.scenario import Scenario
 from scenariomax.schema import OBJECT_TYPE_VEHICLE, Sizes
 from scenariomax.sources.synthetic import geometry as geo
+from scenariomax.sources.synthetic.checks import box_corners, boxes_overlap
 from scenariomax.sources.synthetic.knobs import DEFAULT_KNOBS, SyntheticKnobs
 from scenariomax.sources.synthetic.network import RoadNetwork
 from scenariomax.sources.synthetic.signals import signal_states
@@ -44,7 +47,7 @@ def generate_scenario(seed: int, index: int, sizes: Sizes | None = None, topolog
         traffic = simulate(network, rng, sizes.num_timesteps, knobs)
         sdc = _choose_sdc(network, traffic, rng, sizes, knobs)
         if sdc is not None:
-            scenario = _assemble(scenario_id(seed, index), network, traffic, sdc, sizes)
+            scenario = _sdc_box(_assemble(scenario_id(seed, index), network, traffic, sdc, sizes), knobs)
             return fit_to_budget(_tracking_noise(scenario, rng, knobs), sizes)
     raise GenerationError(f"{scenario_id(seed, index)}: no vehicle fit to be the SDC in {MAX_ATTEMPTS} attempts")
 
@@ -151,6 +154,31 @@ def _assemble(sid: str, network: RoadNetwork, traffic: Traffic, sdc: int, sizes:
         **lane_graph_arrays(links, sizes.num_lane_links),
         **light_fields,
     )
+
+
+def _sdc_box(scenario: Scenario, knobs: SyntheticKnobs) -> Scenario:
+    """The SDC's (object 0's) box at the knobs' length and width (a knob at 0 keeps its own), unless the larger box
+    would overlap another object's anywhere in the log: then the scenario as it is."""
+    if not (knobs.sdc_length_m or knobs.sdc_width_m):
+        return scenario
+    valid = scenario.valid[0]  # (T,)
+    length = np.where(valid, knobs.sdc_length_m or scenario.length[0], scenario.length[0])  # (T,)
+    width = np.where(valid, knobs.sdc_width_m or scenario.width[0], scenario.width[0])
+    others, steps = np.nonzero(scenario.valid[1:] & valid[None])  # every (object, step) beside a valid SDC
+    others += 1
+    x, y, yaw = (np.asarray(a, np.float64) for a in (scenario.x, scenario.y, scenario.bbox_yaw))
+    reach = (np.hypot(length[steps], width[steps]) + np.hypot(scenario.length[others, steps],
+                                                              scenario.width[others, steps])) / 2
+    near = np.hypot(x[others, steps] - x[0, steps], y[others, steps] - y[0, steps]) < reach
+    others, steps = others[near], steps[near]
+    sdc = box_corners(x[0, steps], y[0, steps], yaw[0, steps], length[steps], width[steps])  # (k, 4, 2)
+    other = box_corners(x[others, steps], y[others, steps], yaw[others, steps], scenario.length[others, steps],
+                        scenario.width[others, steps])
+    if boxes_overlap(sdc, other).any():
+        return scenario
+    new_length, new_width = scenario.length.copy(), scenario.width.copy()
+    new_length[0], new_width[0] = length, width
+    return dataclasses.replace(scenario, length=new_length, width=new_width)
 
 
 def _tracking_noise(scenario: Scenario, rng: np.random.Generator, knobs: SyntheticKnobs) -> Scenario:

@@ -1,6 +1,6 @@
 """`SyntheticKnobs`: randomisation knobs of the synthetic generator (traffic density, tracking noise, lane
 widths, speed limits, driver styles, parked cars, where they park and how far they reach towards the lanes, how
-the SDC starts, how junction lights are phased, slow drivers, topology mix).
+the SDC starts, how junction lights are phased, slow drivers, the SDC's size, topology mix).
 
 The defaults reproduce the generator exactly (same arrays, same random stream), so a source or a cache made
 with default knobs is the one made before the knobs existed. Every knob widens or shifts a draw the
@@ -63,6 +63,12 @@ class SyntheticKnobs:
     # must brake for them well ahead; the generator's drivers want 85-110% of the limit, so the only slow leaders
     # are queues at lights. Drawn after the driver's other traits, only when on
     slow_vehicles: float = 0.0
+    # the SDC's box, length and width in metres (0: the body it drove with): every WOMD-derived real record logs the
+    # Waymo car as 5.29 m x 2.33 m, nuScenes' as 4.08 x 1.73, AV2's as 4.5 x 2.0, and the generator's cars are
+    # 4.0-5.2 x 1.8-2.1; the observation does not carry the SDC's size, so a student learns the margins of the car it
+    # trained in. Set only where the logged SDC keeps clear of every other box with it (else the scene keeps its own)
+    sdc_length_m: float = 0.0
+    sdc_width_m: float = 0.0
     topology_weights: str = ""  # "intersection4:2,merge:1": relative weights (others 0); "" the default mix
 
     def __post_init__(self) -> None:
@@ -93,6 +99,8 @@ class SyntheticKnobs:
         _check_number("sdc_slow_start", self.sdc_slow_start, 0.0, 1.0)
         _check_number("sdc_waits", self.sdc_waits, 0.0, 1.0)
         _check_number("slow_vehicles", self.slow_vehicles, 0.0, 1.0)
+        _check_number("sdc_length_m", self.sdc_length_m, 0.0, 8.0)
+        _check_number("sdc_width_m", self.sdc_width_m, 0.0, 3.0)
         if not isinstance(self.topology_weights, str):
             raise ValueError(f"synthetic knob topology_weights: expected text like 'intersection4:2,merge:1', "
                              f"got {self.topology_weights!r}")

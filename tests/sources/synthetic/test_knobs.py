@@ -5,6 +5,7 @@ import dataclasses
 import hashlib
 import json
 import pickle
+import types
 
 import numpy as np
 import pytest
@@ -281,6 +282,29 @@ def test_slow_vehicles_puts_crawling_leaders_on_the_road():
     assert agents.SLOW_SPEED_FACTOR[0] <= min(factors) and max(factors) <= agents.SLOW_SPEED_FACTOR[1]
 
 
+def test_sdc_size_gives_the_sdc_the_box_of_a_real_sdc_and_nothing_else_changes():
+    real_waymo = SyntheticKnobs(sdc_length_m=5.29, sdc_width_m=2.33)
+    for i in range(10):
+        usual, sized = generate_scenario(9, i, SIZES), generate_scenario(9, i, SIZES, knobs=real_waymo)
+        valid = sized.valid[0]
+        assert np.allclose(sized.length[0, valid], 5.29) and np.allclose(sized.width[0, valid], 2.33)
+        for name in ("x", "y", "bbox_yaw", "valid"):  # the same log, drawn from the same stream
+            assert np.array_equal(getattr(usual, name), getattr(sized, name)), name
+        assert np.array_equal(usual.length[1:], sized.length[1:]) and np.array_equal(usual.width[1:], sized.width[1:])
+        assert not [pair for pair in overlapping_vehicle_pairs(sized, types=(1, 2, 3)) if 0 in pair[:2]]
+    only_wider = generate_scenario(9, 0, SIZES, knobs=SyntheticKnobs(sdc_width_m=2.33))
+    assert np.array_equal(only_wider.length, generate_scenario(9, 0, SIZES).length)  # a knob at 0 keeps its own
+
+
+def test_an_sdc_box_that_would_overlap_the_log_is_not_applied():
+    from scenariomax.sources.synthetic.generator import _sdc_box
+
+    scenario = generate_scenario(13, 0, SIZES, knobs=SyntheticKnobs(traffic_density=3.0))
+    assert _sdc_box(scenario, SyntheticKnobs(sdc_length_m=6.0, sdc_width_m=2.6)) is not scenario
+    huge = types.SimpleNamespace(sdc_length_m=20.0, sdc_width_m=10.0)  # past the knobs' bounds: over its neighbours
+    assert _sdc_box(scenario, huge) is scenario
+
+
 def test_driver_style_spread_widens_the_traits_around_their_centres():
     def traits(spread):
         rng, knobs = np.random.default_rng(0), SyntheticKnobs(driver_style_spread=spread)
@@ -307,7 +331,8 @@ def test_driver_style_spread_widens_the_traits_around_their_centres():
     ({"parked_reach": (0.0, 2.5)}, "parked_reach"),
     ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"),
     ({"sdc_slow_start": -0.1}, "sdc_slow_start"), ({"sdc_waits": 1.5}, "sdc_waits"),
-    ({"slow_vehicles": 2.0}, "slow_vehicles"),
+    ({"slow_vehicles": 2.0}, "slow_vehicles"), ({"sdc_width_m": 3.5}, "sdc_width_m"),
+    ({"sdc_length_m": -1.0}, "sdc_length_m"),
 ])
 def test_bad_knobs_raise_one_line_naming_the_knob(kwargs, name):
     with pytest.raises(ValueError, match=name) as caught:
@@ -388,6 +413,7 @@ def test_convert_command_rejects_bad_knobs_in_one_line(tmp_path, args, words):
     SyntheticKnobs(paired_signals=1.0, traffic_density=3.0, walkers_per_crosswalk=(3.0, 6.0)),
     SyntheticKnobs(sdc_waits=1.0, sdc_slow_start=1.0, traffic_density=3.0),
     SyntheticKnobs(slow_vehicles=1.0, traffic_density=3.0, sdc_slow_start=1.0),
+    SyntheticKnobs(sdc_length_m=8.0, sdc_width_m=3.0, traffic_density=3.0, parked_reach=(1.5, 1.5)),
 ])
 def test_extreme_knobs_keep_the_logs_safe(knobs):
     """At the knobs' limits vehicles still never overlap nor run a red light, and the scenarios validate."""
