@@ -44,12 +44,17 @@ def nearest_ahead(x, y, yaw, valid, sdc, xp=np):
     return xp.argmin(xp.where(inside, along, xp.inf), axis=0), inside.any(axis=0)
 
 
+def _moving_steps(speed: np.ndarray, valid: np.ndarray, sdc: int, start: int) -> np.ndarray:
+    """The steps from `start` on where object `sdc` is valid and moves (>= MOVING_MPS). speed, valid (N, T) -> (m,)"""
+    steps = np.arange(start, speed.shape[1])
+    return steps[valid[sdc, steps] & (speed[sdc, steps] >= MOVING_MPS)]
+
+
 def crossing_steps(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, speed: np.ndarray, valid: np.ndarray,
                    object_type: np.ndarray, sdc: int, start: int) -> tuple[int, int, int]:
     """(moving steps, of them with a crossing vehicle nearest ahead, with a pedestrian nearest ahead) of object `sdc`
     from step `start` on. x, y, yaw, speed, valid (N, T); object_type (N,)."""
-    steps = np.arange(start, x.shape[1])
-    moving = steps[valid[sdc, steps] & (speed[sdc, steps] >= MOVING_MPS)]  # (m,)
+    moving = _moving_steps(speed, valid, sdc, start)  # (m,)
     if moving.size == 0:
         return 0, 0, 0
     nearest, found = nearest_ahead(x[:, moving], y[:, moving], yaw[:, moving], valid[:, moving], sdc)  # (m,), (m,)
@@ -64,8 +69,7 @@ def slow_leader_steps(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, speed: np.n
     """Of the moving steps of object `sdc` from step `start` on, those whose nearest object ahead is a vehicle
     heading within 45 degrees of the SDC's and moving slowly (MOVING_MPS to SLOW_LEADER_MPS). Arrays as
     crossing_steps."""
-    steps = np.arange(start, x.shape[1])
-    moving = steps[valid[sdc, steps] & (speed[sdc, steps] >= MOVING_MPS)]  # (m,)
+    moving = _moving_steps(speed, valid, sdc, start)  # (m,)
     if moving.size == 0:
         return 0
     nearest, found = nearest_ahead(x[:, moving], y[:, moving], yaw[:, moving], valid[:, moving], sdc)  # (m,), (m,)
