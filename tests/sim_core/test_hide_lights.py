@@ -40,7 +40,7 @@ def test_the_draw_is_fixed_per_scenario_and_near_the_share():
 
 def test_only_the_training_stream_hides_lights():
     assert preset_config().data.hide_lights == 0.5  # the default preset reads half its training scenes unlit
-    assert preset_config().data.hide_lights_from == "student"  # to the student: its teacher still sees them
+    assert preset_config().data.hide_lights_from == "all"  # from its teacher too (sessions 45-48)
     assert preset_config("sac").data.hide_lights == 0.0
     config = apply_overrides(preset_config(), ["data.hide_lights=0.3"])
     assert train_data_config(config, "shards", seed=0).hide_lights == 0.3

@@ -314,14 +314,18 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # The lights stay hidden from the student only, although that is what it waits for at unlit real junctions (a green
 # light shown ahead moves it off; `benchmarks/imitation_gap.py`, session 45): hidden from the teacher too
 # (`data.hide_lights_from=all`), seed 0's ensemble met the real bar (100% / 0.970) but seed 1's pulled out into the
-# people crossing at nuScenes scene-0553's unrecorded red (real ensemble 82.8% / 0.827; docs/learning.md).
+# people crossing at nuScenes scene-0553's unrecorded red (real ensemble 82.8% / 0.827; docs/learning.md). With the
+# training traffic seeing the learner only while it drives their way (`train.traffic=idm_follow`: cross traffic no
+# longer stops for a student pulling out, as on real roads) both seeds pass scene-0553 and end level on real scenes:
+# ensembles 96.6% / 0.916 (seed 1) and 96.6% / 0.922 (seed 0), end checkpoints 96.6% / 0.940 and 93.1% / 0.904, held-out
+# synthetic 100% / 0.976 and 99% / 0.966 at the end (sessions 47-48): the lights hidden from both, idm_follow traffic.
 DAGGER_OVERRIDES = (
-    "train.teacher=pdm_state", "train.traffic=idm", "algo.student_drive=0.5", "algo.student_mix=episode",
+    "train.teacher=pdm_state", "train.traffic=idm_follow", "algo.student_drive=0.5", "algo.student_mix=episode",
     "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=600000",
     "data.synthetic.junction_parking=0.6", "data.synthetic.max_parked=40", "data.synthetic.parked_fraction=0.4,0.9",
     "data.synthetic.sdc_slow_start=1", "data.synthetic.traffic_density=1.5", "train.total_env_steps=1000000",
     "train.eval_every=100000", "train.checkpoint_every=100000", "env.dynamics=bicycle_no_reverse", "train.ensemble=4",
-    "data.hide_lights=0.5", "data.hide_lights_from=student", "obs.noise.map_dropout=0.25")
+    "data.hide_lights=0.5", "data.hide_lights_from=all", "obs.noise.map_dropout=0.25")
 
 
 def selfplay_config(encoder: str | None, reward: str, algo_preset: str) -> TrainConfig:
