@@ -59,7 +59,7 @@ VEHICLE_TRAITS: tuple[tuple[tuple[float, float], tuple[float, float]], ...] = (
 )
 
 
-# `slow_vehicles`: the desired speed of a driver who crawls, as a share of the limit (1-4 m/s at 10-14 m/s limits)
+# `slow_vehicles`: the desired speed of a crawling driver, as a share of the limit (2-4 m/s: routes.MIN_DESIRED_SPEED)
 SLOW_SPEED_FACTOR: tuple[float, float] = (0.1, 0.3)
 
 
