@@ -81,12 +81,12 @@ def slow_leader_steps(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, speed: np.n
 
 
 def _box(x: float, y: float, yaw: float, length: float, width: float):
+    """An object's box as a shapely polygon (for the gap between two boxes)."""
     from shapely.geometry import Polygon
 
-    c, s = np.cos(yaw), np.sin(yaw)
-    return Polygon([(x + a * c - b * s, y + a * s + b * c)
-                    for a, b in ((length / 2, width / 2), (length / 2, -width / 2), (-length / 2, -width / 2),
-                                 (-length / 2, width / 2))])
+    from scenariomax.sources.synthetic.checks import box_corners
+
+    return Polygon(box_corners(*(np.float64(v) for v in (x, y, yaw, length, width))))
 
 
 def close_parked_passes(x: np.ndarray, y: np.ndarray, yaw: np.ndarray, speed: np.ndarray, valid: np.ndarray,

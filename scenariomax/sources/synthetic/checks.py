@@ -72,6 +72,24 @@ def boxes_overlap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return overlap
 
 
+def overlaps_others(scenario: Scenario, obj: int, length: np.ndarray, width: np.ndarray) -> bool:
+    """Whether object `obj` with the box `length`, `width` (T,) would overlap any other valid object's box at a step
+    where both are valid."""
+    valid = scenario.valid[obj]  # (T,)
+    others, steps = np.nonzero(scenario.valid & valid[None])  # every (object, step) beside a valid `obj`
+    keep = others != obj
+    others, steps = others[keep], steps[keep]
+    x, y, yaw = (np.asarray(a, np.float64) for a in (scenario.x, scenario.y, scenario.bbox_yaw))
+    reach = (np.hypot(length[steps], width[steps]) + np.hypot(scenario.length[others, steps],
+                                                              scenario.width[others, steps])) / 2
+    near = np.hypot(x[others, steps] - x[obj, steps], y[others, steps] - y[obj, steps]) < reach
+    others, steps = others[near], steps[near]
+    mine = box_corners(x[obj, steps], y[obj, steps], yaw[obj, steps], length[steps], width[steps])  # (k, 4, 2)
+    theirs = box_corners(x[others, steps], y[others, steps], yaw[others, steps], scenario.length[others, steps],
+                         scenario.width[others, steps])
+    return bool(boxes_overlap(mine, theirs).any())
+
+
 def overlapping_vehicle_pairs(scenario: Scenario, types: tuple[int, ...] = (OBJECT_TYPE_VEHICLE,)
                               ) -> list[tuple[int, int, int]]:
     """(object a, object b, step) for every pair of valid objects of `types` whose boxes overlap."""

@@ -15,7 +15,7 @@ from scenariomax.enrich.roadgraph import LaneLinks, lane_graph_arrays, polylines
 from scenariomax.scenario import Scenario
 from scenariomax.schema import OBJECT_TYPE_VEHICLE, Sizes
 from scenariomax.sources.synthetic import geometry as geo
-from scenariomax.sources.synthetic.checks import box_corners, boxes_overlap
+from scenariomax.sources.synthetic.checks import overlaps_others
 from scenariomax.sources.synthetic.knobs import DEFAULT_KNOBS, SyntheticKnobs
 from scenariomax.sources.synthetic.network import RoadNetwork
 from scenariomax.sources.synthetic.signals import signal_states
@@ -164,17 +164,7 @@ def _sdc_box(scenario: Scenario, knobs: SyntheticKnobs) -> Scenario:
     valid = scenario.valid[0]  # (T,)
     length = np.where(valid, knobs.sdc_length_m or scenario.length[0], scenario.length[0])  # (T,)
     width = np.where(valid, knobs.sdc_width_m or scenario.width[0], scenario.width[0])
-    others, steps = np.nonzero(scenario.valid[1:] & valid[None])  # every (object, step) beside a valid SDC
-    others += 1
-    x, y, yaw = (np.asarray(a, np.float64) for a in (scenario.x, scenario.y, scenario.bbox_yaw))
-    reach = (np.hypot(length[steps], width[steps]) + np.hypot(scenario.length[others, steps],
-                                                              scenario.width[others, steps])) / 2
-    near = np.hypot(x[others, steps] - x[0, steps], y[others, steps] - y[0, steps]) < reach
-    others, steps = others[near], steps[near]
-    sdc = box_corners(x[0, steps], y[0, steps], yaw[0, steps], length[steps], width[steps])  # (k, 4, 2)
-    other = box_corners(x[others, steps], y[others, steps], yaw[others, steps], scenario.length[others, steps],
-                        scenario.width[others, steps])
-    if boxes_overlap(sdc, other).any():
+    if overlaps_others(scenario, 0, length, width):
         return scenario
     new_length, new_width = scenario.length.copy(), scenario.width.copy()
     new_length[0], new_width[0] = length, width
