@@ -42,6 +42,7 @@ def test_step_inputs_hold_the_sdc_history_and_exclude_its_slot():
     obs = observation_inputs(state, 5)
     np.testing.assert_allclose(obs.sdc_xy[:, 0], [6.0, 7.0, 8.0, 9.0, 10.0], atol=1e-4)
     assert obs.object_valid[0].tolist() == [False] * 5 and obs.object_valid[1].all()
+    np.testing.assert_allclose(obs.sdc_size, [state.sim_trajectory.length[0, 10], state.sim_trajectory.width[0, 10]])
 
 
 @pytest.mark.slow  # ~11 s on 2 cores: kept out of the 10-minute default suite

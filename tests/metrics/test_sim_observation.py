@@ -44,6 +44,7 @@ def obs_inputs(objects=((10.0, 0.0, 0.0, 5.0),), sdc_yaw=0.0, lights=()):
     return ObservationInputs(
         sdc_xy=jnp.asarray(sdc_xy), sdc_yaw=jnp.full(K, sdc_yaw, jnp.float32),
         sdc_vel=jnp.tile(jnp.array([[10.0, 0.0]]), (K, 1)), sdc_valid=jnp.ones(K, bool),
+        sdc_size=jnp.array([4.5, 2.0], jnp.float32),
         object_xy=jnp.asarray(xy), object_yaw=jnp.asarray(yaw), object_vel=jnp.asarray(vel),
         object_size=jnp.tile(jnp.array([[4.5, 2.0]]), (n, 1)), object_type=jnp.asarray(types),
         object_valid=jnp.asarray(valid), light_xy=jnp.asarray(light_xy), light_state=jnp.asarray(light_state),
@@ -92,6 +93,17 @@ def test_sdc_history_hides_the_older_steps_of_the_sdc_only(index):
     np.testing.assert_array_equal(OBSERVE(index, obs_inputs(), ObservationConfig(sdc_history=K + 3)).sdc, full.sdc)
     with pytest.raises(ValueError, match="sdc_history"):
         ObservationConfig(sdc_history=0)
+
+
+def test_sdc_size_adds_the_sdc_box_beside_its_history_and_changes_nothing_else(index):
+    plain = OBSERVE(index, obs_inputs(), ObservationConfig())
+    sized = OBSERVE(index, obs_inputs(), ObservationConfig(sdc_size=True))
+    assert plain.sdc.shape == (K, 6) and sized.sdc.shape == (K, 8)
+    np.testing.assert_array_equal(sized.sdc[:, :6], plain.sdc)
+    np.testing.assert_allclose(sized.sdc[:, 6:], np.tile([[0.45, 0.2]], (K, 1)), atol=1e-6)  # 4.5 x 2.0 over 10 m
+    bigger = OBSERVE(index, obs_inputs().replace(sdc_size=jnp.array([5.29, 2.33])), ObservationConfig(sdc_size=True))
+    assert not np.allclose(bigger.sdc[:, 6:], sized.sdc[:, 6:])
+    np.testing.assert_array_equal(sized.objects, plain.objects)
 
 
 def test_roadgraph_points_lie_in_the_box_ahead(index):

@@ -140,6 +140,7 @@ def observation_inputs(state: SimulatorState, num_history: int = 5) -> Observati
     vel = jnp.stack([window.vel_x, window.vel_y], axis=-1)
     return ObservationInputs(
         sdc_xy=xy[sdc], sdc_yaw=window.yaw[sdc], sdc_vel=vel[sdc], sdc_valid=window.valid[sdc],
+        sdc_size=jnp.stack([now.length[sdc], now.width[sdc]]),
         object_xy=xy, object_yaw=window.yaw, object_vel=vel,
         object_size=jnp.stack([now.length, now.width], axis=-1),
         object_type=state.object_metadata.object_types,

@@ -14,6 +14,7 @@ from vmax_sim.observation.features import (
     observe,
     path_targets,
     roadgraph_features,
+    sdc_feature_count,
 )
 
 __all__ = [
@@ -32,4 +33,5 @@ __all__ = [
     "observe",
     "path_targets",
     "roadgraph_features",
+    "sdc_feature_count",
 ]

@@ -62,6 +62,10 @@ class ObservationConfig:
     # how many of those steps the SDC sees of itself (None, or k and more: all k). A student that sees itself standing
     # learns to keep standing: its own history predicts its teacher's label better than the scene does
     sdc_history: int | None = None
+    # the SDC's own length and width beside its history (two more columns of `Observation.sdc`): real SDCs range from
+    # 4.1 x 1.7 m (nuScenes) to 5.3 x 2.3 m (the Waymo car); a student that cannot see its size keeps the margins of
+    # the cars it trained in (docs/learning.md, session 48)
+    sdc_size: bool = False
     max_distance: float = 50.0  # m, positions are divided by it
     max_speed: float = 30.0  # m/s, velocities and speed limits are divided by it
     max_size: float = 10.0  # m, box sizes are divided by it

@@ -27,6 +27,12 @@ OBJECT_FEATURES = 8 + NUM_OBJECT_TYPES  # x, y, vx, vy, cos, sin, length, width,
 ROADGRAPH_FEATURES = 5 + 3  # x, y, dir x, dir y, speed limit, edge / lane / line one-hot
 LIGHT_STATES = ("red", "yellow", "green", "unknown")  # the order of the lights' state one-hot
 LIGHT_FEATURES = 2 + len(LIGHT_STATES)  # x, y, state one-hot
+SDC_FEATURES = 6  # x, y, vx, vy, cos, sin; + length, width with `ObservationConfig.sdc_size`
+
+
+def sdc_feature_count(config: ObservationConfig) -> int:
+    """The width of `Observation.sdc`'s last axis under `config`."""
+    return SDC_FEATURES + (2 if config.sdc_size else 0)
 
 
 @flax.struct.dataclass
@@ -37,6 +43,7 @@ class ObservationInputs:
     sdc_yaw: jnp.ndarray  # (k,) float32
     sdc_vel: jnp.ndarray  # (k, 2) float32
     sdc_valid: jnp.ndarray  # (k,) bool
+    sdc_size: jnp.ndarray  # (2,) float32, the SDC's length and width now (m)
     object_xy: jnp.ndarray  # (N, k, 2) float32, other objects' history
     object_yaw: jnp.ndarray  # (N, k) float32
     object_vel: jnp.ndarray  # (N, k, 2) float32
@@ -54,7 +61,8 @@ class ObservationInputs:
 
 @flax.struct.dataclass
 class Observation:
-    sdc: jnp.ndarray  # (k, 6) float32, SDC history: x, y, vx, vy, cos, sin (SDC frame, normalised)
+    # (k, sdc_feature_count) float32, SDC history: x, y, vx, vy, cos, sin (SDC frame, normalised) [, length, width]
+    sdc: jnp.ndarray
     sdc_valid: jnp.ndarray  # (k,) bool
     objects: jnp.ndarray  # (n, k, OBJECT_FEATURES) float32
     objects_valid: jnp.ndarray  # (n, k) bool
@@ -249,7 +257,7 @@ def light_row(local_xy_m: tuple[float, float], state: str, max_distance: float) 
 
 def observed_sdc_speed(sdc: jnp.ndarray) -> jnp.ndarray:
     """The SDC's speed now as its observation shows it, in the observation's units (m/s over max_speed):
-    sdc (..., k, 6), `Observation.sdc` -> (...)."""
+    sdc (..., k, F), `Observation.sdc` -> (...)."""
     return jnp.linalg.norm(sdc[..., -1, 2:4].astype(jnp.float32), axis=-1)
 
 
@@ -278,6 +286,9 @@ def observe(map_index: MapIndex, inputs: ObservationInputs, config: ObservationC
     objects, objects_valid = object_features(inputs, indices, index_valid, config)
     origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
     sdc = _heading_features(inputs.sdc_xy, inputs.sdc_vel, inputs.sdc_yaw, origin, origin_yaw, config)
+    if config.sdc_size:  # the car's own box, so one student can keep the margins of cars of every size
+        size = jnp.broadcast_to(inputs.sdc_size / config.max_size, sdc.shape[:-1] + (2,))
+        sdc = jnp.concatenate([sdc, size], -1)
     sdc_valid = inputs.sdc_valid
     if config.sdc_history is not None:  # the older steps hidden, as if never recorded
         sdc_valid = sdc_valid & (jnp.arange(sdc_valid.shape[0]) >= sdc_valid.shape[0] - config.sdc_history)

@@ -20,7 +20,13 @@ from vmax_sim.evaluation.evaluate import evaluate, mark_partial
 from vmax_sim.evaluation.report import expected_num_scenarios
 from vmax_sim.evaluation.trained import trained_policy
 from vmax_sim.map_index.structure import MapIndexConfig
-from vmax_sim.observation import LIGHT_FEATURES, OBJECT_FEATURES, ROADGRAPH_FEATURES, Observation
+from vmax_sim.observation import (
+    LIGHT_FEATURES,
+    OBJECT_FEATURES,
+    ROADGRAPH_FEATURES,
+    Observation,
+    sdc_feature_count,
+)
 from vmax_sim.policies.base import Policy
 from vmax_sim.training.checkpoint import CheckpointStore
 from vmax_sim.training.ensemble import ensemble_learner, is_ensemble, member_params
@@ -75,7 +81,8 @@ def _example_observation(config, env):
     k, n = obs.num_history, obs.num_objects
     zeros = jnp.zeros
     return Observation(
-        sdc=zeros((1, k, 6)), sdc_valid=zeros((1, k), bool), objects=zeros((1, n, k, OBJECT_FEATURES)),
+        sdc=zeros((1, k, sdc_feature_count(obs))), sdc_valid=zeros((1, k), bool),
+        objects=zeros((1, n, k, OBJECT_FEATURES)),
         objects_valid=zeros((1, n, k), bool), roadgraph=zeros((1, points, ROADGRAPH_FEATURES)),
         roadgraph_valid=zeros((1, points), bool), lights=zeros((1, obs.num_lights, LIGHT_FEATURES)),
         lights_valid=zeros((1, obs.num_lights), bool), path_targets=zeros((1, obs.num_path_targets, 2)),

@@ -24,6 +24,7 @@ from scenariomax.sources.synthetic.traffic import DT_S, Traffic, simulate
 
 SOURCE_DATASET = "synthetic"
 MAX_ATTEMPTS = 4  # fresh networks tried when a simulation offers no usable SDC
+SDC_BOX_STREAM = 5  # the SDC box's draw has a stream of its own: every other draw stays as without the knobs
 FIRST_OBJECT_ID = 1000
 
 
@@ -47,7 +48,8 @@ def generate_scenario(seed: int, index: int, sizes: Sizes | None = None, topolog
         traffic = simulate(network, rng, sizes.num_timesteps, knobs)
         sdc = _choose_sdc(network, traffic, rng, sizes, knobs)
         if sdc is not None:
-            scenario = _sdc_box(_assemble(scenario_id(seed, index), network, traffic, sdc, sizes), knobs)
+            box_share = np.random.default_rng([int(seed), int(index), SDC_BOX_STREAM]).uniform()
+            scenario = _sdc_box(_assemble(scenario_id(seed, index), network, traffic, sdc, sizes), knobs, box_share)
             return fit_to_budget(_tracking_noise(scenario, rng, knobs), sizes)
     raise GenerationError(f"{scenario_id(seed, index)}: no vehicle fit to be the SDC in {MAX_ATTEMPTS} attempts")
 
@@ -156,14 +158,15 @@ def _assemble(sid: str, network: RoadNetwork, traffic: Traffic, sdc: int, sizes:
     )
 
 
-def _sdc_box(scenario: Scenario, knobs: SyntheticKnobs) -> Scenario:
-    """The SDC's (object 0's) box at the knobs' length and width (a knob at 0 keeps its own), unless the larger box
-    would overlap another object's anywhere in the log: then the scenario as it is."""
-    if not (knobs.sdc_length_m or knobs.sdc_width_m):
+def _sdc_box(scenario: Scenario, knobs: SyntheticKnobs, share: float = 0.5) -> Scenario:
+    """The SDC's (object 0's) box at `share` (0-1) of the knobs' length and width ranges (a knob at 0:0 keeps its
+    own), unless the box would overlap another object's anywhere in the log: then the scenario as it is."""
+    box_length, box_width = knobs.sdc_box(share)
+    if not (box_length or box_width):
         return scenario
     valid = scenario.valid[0]  # (T,)
-    length = np.where(valid, knobs.sdc_length_m or scenario.length[0], scenario.length[0])  # (T,)
-    width = np.where(valid, knobs.sdc_width_m or scenario.width[0], scenario.width[0])
+    length = np.where(valid, box_length or scenario.length[0], scenario.length[0])  # (T,)
+    width = np.where(valid, box_width or scenario.width[0], scenario.width[0])
     if overlaps_others(scenario, 0, length, width):
         return scenario
     new_length, new_width = scenario.length.copy(), scenario.width.copy()

@@ -64,12 +64,14 @@ class SyntheticKnobs:
     # the moving SDC steps within 30 m, the bc-dagger knobs 3.0%); off in the preset. Drawn after the driver's other
     # traits, only when on
     slow_vehicles: float = 0.0
-    # the SDC's box, length and width in metres (0: the body it drove with): every WOMD-derived real record logs the
-    # Waymo car as 5.29 m x 2.33 m, nuScenes' as 4.08 x 1.73, AV2's as 4.5 x 2.0, and the generator's cars are
-    # 4.0-5.2 x 1.8-2.1; the observation does not carry the SDC's size, so a student learns the margins of the car it
-    # trained in. Set only where the logged SDC keeps clear of every other box with it (else the scene keeps its own)
-    sdc_length_m: float = 0.0
-    sdc_width_m: float = 0.0
+    # ranges of the SDC's box, length and width in metres (0:0 the body it drove with; one number a fixed size): every
+    # WOMD-derived real record logs the Waymo car as 5.29 m x 2.33 m, nuScenes' as 4.08 x 1.73, AV2's as 4.5 x 2.0, and
+    # the generator's cars are 4.0-5.2 x 1.8-2.1. One share of each range is drawn per scene for both (a long car is a
+    # wide one), from a stream of its own. Set only where the logged SDC keeps clear of every other box with it (else
+    # the scene keeps its own); a student learns a car's margins only where its observation shows the size
+    # (`obs.sdc_size`)
+    sdc_length_m: tuple[float, float] = (0.0, 0.0)
+    sdc_width_m: tuple[float, float] = (0.0, 0.0)
     topology_weights: str = ""  # "intersection4:2,merge:1": relative weights (others 0); "" the default mix
 
     def __post_init__(self) -> None:
@@ -77,7 +79,7 @@ class SyntheticKnobs:
         # describe (as_dict, cache names) alike.
         for field in dataclasses.fields(self):
             value, default = getattr(self, field.name), field.default
-            if isinstance(default, tuple) and isinstance(value, (list, tuple, str)):
+            if isinstance(default, tuple) and isinstance(value, (list, tuple, str, int, float)):
                 object.__setattr__(self, field.name, _coerce(field.name, value, default))
             elif isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
                 object.__setattr__(self, field.name, float(value))
@@ -100,8 +102,8 @@ class SyntheticKnobs:
         _check_number("sdc_slow_start", self.sdc_slow_start, 0.0, 1.0)
         _check_number("sdc_waits", self.sdc_waits, 0.0, 1.0)
         _check_number("slow_vehicles", self.slow_vehicles, 0.0, 1.0)
-        _check_number("sdc_length_m", self.sdc_length_m, 0.0, 8.0)
-        _check_number("sdc_width_m", self.sdc_width_m, 0.0, 3.0)
+        _check_range("sdc_length_m", self.sdc_length_m, 0.0, 8.0)
+        _check_range("sdc_width_m", self.sdc_width_m, 0.0, 3.0)
         if not isinstance(self.topology_weights, str):
             raise ValueError(f"synthetic knob topology_weights: expected text like 'intersection4:2,merge:1', "
                              f"got {self.topology_weights!r}")
@@ -175,6 +177,10 @@ class SyntheticKnobs:
         (lo, hi), (base_lo, base_hi) = self.lane_width_m, BASE_LANE_WIDTH_M
         return lo + (draw - base_lo) * (hi - lo) / (base_hi - base_lo)
 
+    def sdc_box(self, share: float) -> tuple[float, float]:
+        """The SDC's length and width at `share` (0-1) of their ranges; 0 for a dimension whose knob is 0:0."""
+        return tuple(lo + share * (hi - lo) for lo, hi in (self.sdc_length_m, self.sdc_width_m))
+
     def spread(self, draw: float, centre: float, limits: tuple[float, float]) -> float:
         """A driver trait drawn as usual, its distance from `centre` scaled by `driver_style_spread` and
         clipped to `limits` (agents.VEHICLE_TRAITS)."""
@@ -206,6 +212,8 @@ def _coerce(name: str, value, default):
                 if len(parts) == 1:  # a single number: a fixed value
                     parts = parts * 2
                 value = parts
+            elif isinstance(value, (int, float)) and not isinstance(value, bool):  # a fixed value (older configs)
+                value = (value, value)
             return tuple(float(v) for v in value)
         if isinstance(value, bool):
             raise ValueError

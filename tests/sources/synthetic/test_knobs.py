@@ -296,12 +296,29 @@ def test_sdc_size_gives_the_sdc_the_box_of_a_real_sdc_and_nothing_else_changes()
     assert np.array_equal(only_wider.length, generate_scenario(9, 0, SIZES).length)  # a knob at 0 keeps its own
 
 
+def test_sdc_size_ranges_draw_one_share_per_scene_for_length_and_width():
+    ranged = SyntheticKnobs.from_items(["sdc_length_m=4.0:5.4", "sdc_width_m=1.7:2.4"])
+    boxes = []
+    for i in range(12):
+        usual, sized = generate_scenario(9, i, SIZES), generate_scenario(9, i, SIZES, knobs=ranged)
+        valid = sized.valid[0]
+        length, width = float(sized.length[0, valid][0]), float(sized.width[0, valid][0])
+        if (length, width) == (float(usual.length[0, valid][0]), float(usual.width[0, valid][0])):
+            continue  # the drawn box would overlap the log: the scene keeps its own
+        assert 4.0 <= length <= 5.4 and 1.7 <= width <= 2.4
+        assert (length - 4.0) / 1.4 == pytest.approx((width - 1.7) / 0.7, abs=1e-5)  # one share for both
+        assert np.array_equal(usual.x, sized.x) and np.array_equal(usual.length[1:], sized.length[1:])
+        boxes.append(length)
+    assert len(boxes) >= 8 and max(boxes) - min(boxes) > 0.5  # sizes vary over the range, scene by scene
+    assert SyntheticKnobs(sdc_length_m=5.29).sdc_length_m == (5.29, 5.29)  # a number (older configs): fixed
+
+
 def test_an_sdc_box_that_would_overlap_the_log_is_not_applied():
     from scenariomax.sources.synthetic.generator import _sdc_box
 
     scenario = generate_scenario(13, 0, SIZES, knobs=SyntheticKnobs(traffic_density=3.0))
     assert _sdc_box(scenario, SyntheticKnobs(sdc_length_m=6.0, sdc_width_m=2.6)) is not scenario
-    huge = types.SimpleNamespace(sdc_length_m=20.0, sdc_width_m=10.0)  # past the knobs' bounds: over its neighbours
+    huge = types.SimpleNamespace(sdc_box=lambda share: (20.0, 10.0))  # past the knobs' bounds: over its neighbours
     assert _sdc_box(scenario, huge) is scenario
 
 
