@@ -62,6 +62,11 @@ def _now(state: SimulatorState) -> Trajectory:
     return jax.tree.map(lambda a: a[..., 0], state.current_sim_trajectory)
 
 
+def _size_of(now: Trajectory, index: jax.Array) -> jax.Array:
+    """One object's length and width now. -> (2,) m"""
+    return jnp.stack([now.length[index], now.width[index]])
+
+
 def _boxes(now: Trajectory) -> jax.Array:
     """[x, y, length, width, yaw] per object. (N,) fields -> (N, 5)"""
     return jnp.stack([now.x, now.y, now.length, now.width, now.yaw], axis=-1).astype(jnp.float32)
@@ -108,7 +113,7 @@ def step_inputs(state: SimulatorState, path_log_arc: jax.Array | None = None) ->
     return StepInputs(
         sdc_xy=jnp.stack([sdc_x, sdc_y], axis=-1),
         sdc_yaw=sdc_yaw,
-        sdc_size=jnp.stack([now.length[sdc], now.width[sdc]]),
+        sdc_size=_size_of(now, sdc),
         sdc_log_xy=jnp.stack([log.x[sdc, t], log.y[sdc, t]]),
         object_boxes=_boxes(now),
         object_vel=jnp.stack([now.vel_x, now.vel_y], axis=-1),
@@ -140,7 +145,7 @@ def observation_inputs(state: SimulatorState, num_history: int = 5) -> Observati
     vel = jnp.stack([window.vel_x, window.vel_y], axis=-1)
     return ObservationInputs(
         sdc_xy=xy[sdc], sdc_yaw=window.yaw[sdc], sdc_vel=vel[sdc], sdc_valid=window.valid[sdc],
-        sdc_size=jnp.stack([now.length[sdc], now.width[sdc]]),
+        sdc_size=_size_of(now, sdc),
         object_xy=xy, object_yaw=window.yaw, object_vel=vel,
         object_size=jnp.stack([now.length, now.width], axis=-1),
         object_type=state.object_metadata.object_types,

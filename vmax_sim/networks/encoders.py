@@ -58,8 +58,8 @@ def flatten_batch(obs: Observation) -> tuple[Observation, tuple[int, ...]]:
 def group_arrays(obs: Observation) -> dict[str, tuple[jnp.ndarray, jnp.ndarray]]:
     """Each group's raw entries with the masked ones zeroed (flat batch).
 
-    -> {"sdc": (B, k, 6), (B, k); "objects": (B, n, k, 12), (B, n, k); "roadgraph": (B, m, 8), (B, m);
-        "lights": (B, L, 6), (B, L); "path_targets": (B, P, 2), (B, P)}.
+    -> {"sdc": (B, k, F) (F = 6, 8 with obs.sdc_size), (B, k); "objects": (B, n, k, 12), (B, n, k);
+        "roadgraph": (B, m, 8), (B, m); "lights": (B, L, 6), (B, L); "path_targets": (B, P, 2), (B, P)}.
     """
     pairs = ((obs.sdc, obs.sdc_valid), (obs.objects, obs.objects_valid), (obs.roadgraph, obs.roadgraph_valid),
              (obs.lights, obs.lights_valid), (obs.path_targets, obs.path_targets_valid))
@@ -82,7 +82,7 @@ def entity_tokens(obs: Observation) -> dict[str, tuple[jnp.ndarray, jnp.ndarray]
     """
     groups = group_arrays(obs)
     sdc, sdc_valid = groups["sdc"]
-    tokens = {"sdc": history_tokens(sdc[:, None], sdc_valid[:, None]),  # (B, 1, k * 7)
+    tokens = {"sdc": history_tokens(sdc[:, None], sdc_valid[:, None]),  # (B, 1, k * (F + 1))
               "objects": history_tokens(*groups["objects"])}  # (B, n, k * 13)
     return tokens | {name: groups[name] for name in GROUPS[2:]}
 
@@ -91,7 +91,7 @@ def step_tokens(obs: Observation) -> list[tuple[jnp.ndarray, jnp.ndarray]]:
     """Tokens of "wayformer": one per SDC step and object step (with a one-hot of the step, whose embedding
     is the learned time embedding), roadgraph point, light and path target.
 
-    -> [((B, k, 6 + k), (B, k)), ((B, n * k, 12 + k), (B, n * k)), ((B, m, 8), (B, m)), lights, targets].
+    -> [((B, k, F + k), (B, k)), ((B, n * k, 12 + k), (B, n * k)), ((B, m, 8), (B, m)), lights, targets].
     """
     groups = group_arrays(obs)
 
@@ -133,7 +133,7 @@ def polylines(obs: Observation, chunk: int) -> dict[str, tuple[jnp.ndarray, jnp.
     sdc, sdc_valid = groups["sdc"]
     lights, lights_valid = groups["lights"]
     targets, targets_valid = groups["path_targets"]
-    return {"sdc": with_time(sdc[:, None], sdc_valid[:, None]),  # (B, 1, k, 7)
+    return {"sdc": with_time(sdc[:, None], sdc_valid[:, None]),  # (B, 1, k, F + 1)
             "objects": with_time(*groups["objects"]),  # (B, n, k, 13)
             "roadgraph": chunk_points(*groups["roadgraph"], chunk),  # (B, m / chunk, chunk, 8)
             "lights": (lights[:, :, None], lights_valid[:, :, None]),  # (B, L, 1, 6)
