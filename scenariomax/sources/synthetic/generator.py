@@ -49,7 +49,8 @@ def generate_scenario(seed: int, index: int, sizes: Sizes | None = None, topolog
         sdc = _choose_sdc(network, traffic, rng, sizes, knobs)
         if sdc is not None:
             box_share = np.random.default_rng([int(seed), int(index), SDC_BOX_STREAM]).uniform()
-            scenario = _sdc_box(_assemble(scenario_id(seed, index), network, traffic, sdc, sizes), knobs, box_share)
+            scenario = _sdc_box(_assemble(scenario_id(seed, index), network, traffic, sdc, sizes),
+                                *knobs.sdc_box(box_share))
             return fit_to_budget(_tracking_noise(scenario, rng, knobs), sizes)
     raise GenerationError(f"{scenario_id(seed, index)}: no vehicle fit to be the SDC in {MAX_ATTEMPTS} attempts")
 
@@ -158,10 +159,9 @@ def _assemble(sid: str, network: RoadNetwork, traffic: Traffic, sdc: int, sizes:
     )
 
 
-def _sdc_box(scenario: Scenario, knobs: SyntheticKnobs, share: float = 0.5) -> Scenario:
-    """The SDC's (object 0's) box at `share` (0-1) of the knobs' length and width ranges (a knob at 0:0 keeps its
-    own), unless the box would overlap another object's anywhere in the log: then the scenario as it is."""
-    box_length, box_width = knobs.sdc_box(share)
+def _sdc_box(scenario: Scenario, box_length: float, box_width: float) -> Scenario:
+    """The SDC's (object 0's) box at `box_length` x `box_width` m (0 keeps that dimension as it is), unless the box
+    would overlap another object's anywhere in the log: then the scenario as it is."""
     if not (box_length or box_width):
         return scenario
     valid = scenario.valid[0]  # (T,)

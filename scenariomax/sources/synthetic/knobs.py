@@ -75,8 +75,8 @@ class SyntheticKnobs:
     topology_weights: str = ""  # "intersection4:2,merge:1": relative weights (others 0); "" the default mix
 
     def __post_init__(self) -> None:
-        # Normalise lists (JSON, config files) to tuples and integers to floats, so equal knobs compare and
-        # describe (as_dict, cache names) alike.
+        # Normalise lists (JSON, config files) and single numbers of range knobs to tuples and integers to floats, so
+        # equal knobs compare and describe (as_dict, cache names) alike.
         for field in dataclasses.fields(self):
             value, default = getattr(self, field.name), field.default
             if isinstance(default, tuple) and isinstance(value, (list, tuple, str, int, float)):

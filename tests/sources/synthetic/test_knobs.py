@@ -5,7 +5,6 @@ import dataclasses
 import hashlib
 import json
 import pickle
-import types
 
 import numpy as np
 import pytest
@@ -317,9 +316,8 @@ def test_an_sdc_box_that_would_overlap_the_log_is_not_applied():
     from scenariomax.sources.synthetic.generator import _sdc_box
 
     scenario = generate_scenario(13, 0, SIZES, knobs=SyntheticKnobs(traffic_density=3.0))
-    assert _sdc_box(scenario, SyntheticKnobs(sdc_length_m=6.0, sdc_width_m=2.6)) is not scenario
-    huge = types.SimpleNamespace(sdc_box=lambda share: (20.0, 10.0))  # past the knobs' bounds: over its neighbours
-    assert _sdc_box(scenario, huge) is scenario
+    assert _sdc_box(scenario, 6.0, 2.6) is not scenario
+    assert _sdc_box(scenario, 20.0, 10.0) is scenario  # past the knobs' bounds: over its neighbours
 
 
 def test_driver_style_spread_widens_the_traits_around_their_centres():
