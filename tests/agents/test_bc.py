@@ -139,6 +139,32 @@ def test_bc_moving_average_is_the_policy_that_acts():
         get_config("bc", "debug", ema_decay=1.0)
 
 
+def test_bc_learning_rate_share_scales_each_step():
+    """With `lr_end_fraction` < 1 the state carries the learning rate's share: 0 leaves the policy where it is,
+    0.5 takes half of Adam's step; a constant rate keeps the state's old layout (no share)."""
+    from vmax_sim.agents.common import learning_rate_scale
+    assert [learning_rate_scale(p, 0.5, 0.1) for p in (0.0, 0.5, 0.75, 1.0, 1.2)] == pytest.approx(
+        [1.0, 1.0, 0.55, 0.1, 0.1])
+    config = get_config("bc", "debug", learning_rate=1e-3, lr_end_fraction=0.1)
+    learner = make_learner("bc", config, lambda: toy.ToyEncoder(32), toy.ACTION_DIM)
+    state = learner.init(jax.random.key(0), toy.observe(toy.reset(jax.random.key(0), 2)))
+    assert float(state.lr_scale) == 1.0
+    batch, update, leaves = toy.random_batch(jax.random.key(1), 128), jax.jit(learner.update), jax.tree.leaves
+    full, _ = update(state, batch, jax.random.key(0))
+    half, _ = update(state.replace(lr_scale=jnp.float32(0.5)), batch, jax.random.key(0))
+    still, _ = update(state.replace(lr_scale=jnp.float32(0.0)), batch, jax.random.key(0))
+    for start, a, b, c in zip(leaves(state.policy_params), leaves(full.policy_params), leaves(half.policy_params),
+                              leaves(still.policy_params)):
+        np.testing.assert_allclose(b - start, 0.5 * (a - start), atol=1e-7)
+        np.testing.assert_array_equal(c, start)
+    plain = make_learner("bc", get_config("bc", "debug"), lambda: toy.ToyEncoder(32), toy.ACTION_DIM)
+    assert plain.init(jax.random.key(0), toy.observe(toy.reset(jax.random.key(0), 2))).lr_scale is None
+    with pytest.raises(ValueError, match="lr_end_fraction"):
+        get_config("bc", "debug", lr_end_fraction=1.5)
+    with pytest.raises(ValueError, match="lr_decay_start"):
+        get_config("bc", "debug", lr_decay_start=1.0)
+
+
 def test_bc_sac_schedule():
     steps = jnp.arange(6)
     np.testing.assert_allclose(jax.vmap(lambda s: bc_weight_at(s, 2, 0.7))(steps), [0.7, 0, 0.7, 0, 0.7, 0],

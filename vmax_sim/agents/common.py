@@ -36,6 +36,13 @@ def ema_weight(step: jax.Array, decay: float) -> jax.Array:
     return jnp.maximum(1.0 - decay, warm.astype(jnp.float32))
 
 
+def learning_rate_scale(progress: float, decay_start: float, end_fraction: float) -> float:
+    """The learning rate's share at `progress` (0..1) of a run: 1 until `decay_start`, then linear down to
+    `end_fraction` at 1 (and held there past it)."""
+    share = min(max((progress - decay_start) / (1.0 - decay_start), 0.0), 1.0)
+    return 1.0 - share * (1.0 - end_fraction)
+
+
 def apply_gradients(optimizer: optax.GradientTransformation, grads: Params, opt_state, params: Params):
     """One optimiser step: (params, opt_state) after applying `grads`."""
     updates, opt_state = optimizer.update(grads, opt_state, params)

@@ -36,6 +36,7 @@ import numpy as np
 from scenariomax.errors import InputError, describe_os_error
 from scenariomax.locks import FolderBusyError, FolderLock
 from vmax_sim.agents import make_learner
+from vmax_sim.agents.common import learning_rate_scale
 from vmax_sim.data import DataConfig, cache_dir
 from vmax_sim.data.mixture import SYNTHETIC, format_sources, parse_sources, source_probabilities
 from vmax_sim.env.learning import LearningEnv
@@ -507,6 +508,26 @@ def resumed_config(saved: TrainConfig, overrides: Sequence[str]) -> TrainConfig:
     return apply_overrides(saved, overrides)
 
 
+def run_progress(config: TrainConfig, env_steps: int, wall_s: float) -> float:
+    """How far a run is (0..1): its env-step share, or with train.max_wall_minutes the larger of that and its
+    wall-clock share. Several processes read the env steps alone: their clocks differ, their steps do not."""
+    progress = env_steps / config.train.total_env_steps
+    if config.train.max_wall_minutes and distributed.num_processes() == 1:
+        progress = max(progress, wall_s / (60.0 * config.train.max_wall_minutes))
+    return min(progress, 1.0)
+
+
+def with_learning_rate_share(carry: TrainCarry, config: TrainConfig, env_steps: int, wall_s: float) -> TrainCarry:
+    """`carry` with its learner's learning-rate share set for the next chunk (BC's `algo.lr_end_fraction`;
+    unchanged when the learner keeps a constant rate)."""
+    share = getattr(carry.learner, "lr_scale", None)
+    if share is None:
+        return carry
+    algo = config.algo_config
+    value = learning_rate_scale(run_progress(config, env_steps, wall_s), algo.lr_decay_start, algo.lr_end_fraction)
+    return carry.replace(learner=carry.learner.replace(lr_scale=share * 0.0 + value))  # keeps its placement
+
+
 def train(config: TrainConfig, run_dir: str | Path, *, resume: bool = False, progress: bool = True,
           print_fn: Callable[[str], None] = print, stop_after_chunks: int | None = None,
           resume_overrides: Sequence[str] = ()) -> TrainResult:
@@ -621,6 +642,7 @@ def _run(config, run_dir, resume, progress, print_fn, stop_after_chunks, store, 
                         [wall_before + time.perf_counter() - start >= budget_s])[0]:
                     stopped = "max_wall_minutes"
                     break
+                carry = with_learning_rate_share(carry, config, env_steps, wall_before + time.perf_counter() - start)
                 tick = time.perf_counter()
                 carry, stats = chunk_fn(carry, pool)
                 scalars = _host_scalars(stats)  # blocks until the chunk is done

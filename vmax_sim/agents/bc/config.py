@@ -38,6 +38,12 @@ class BCConfig:
     # > 0 the average is the policy that acts, is evaluated and is saved (0: the raw parameters). Small-batch
     # steps move a closed-loop driver between checkpoints; the average keeps what the recent steps agree on
     ema_decay: float = 0.0
+    # the learning rate falls linearly from lr_decay_start of the run (the larger of its env-step share and, with
+    # train.max_wall_minutes, its wall-clock share) to lr_end_fraction x learning_rate at its end (1: constant). A
+    # student's closed-loop driving moves from one checkpoint to the next; small last steps keep the end near
+    # what the run has learnt instead of where its last few thousand batches pushed it
+    lr_end_fraction: float = 1.0
+    lr_decay_start: float = 0.5
     # network
     policy_hidden_sizes: tuple[int, ...] = (256, 64, 32)
     activation: str = "relu"
@@ -65,6 +71,10 @@ class BCConfig:
         check_positive(self, "learning_rate", "num_envs", "batch_size", "updates_per_step", "unroll_length",
                        "buffer_size", "expert_action_eps", "standing_weight", "pull_away_weight",
                        "standing_speed")
+        if not 0.0 <= self.lr_end_fraction <= 1.0:
+            raise ValueError(f"lr_end_fraction must be in [0, 1], got {self.lr_end_fraction}")
+        if not 0.0 <= self.lr_decay_start < 1.0:
+            raise ValueError(f"lr_decay_start must be in [0, 1), got {self.lr_decay_start}")
         if not 0.0 <= self.ema_decay < 1.0:
             raise ValueError(f"ema_decay must be in [0, 1), got {self.ema_decay}")
         if not 0.0 <= self.student_drive <= 1.0:

@@ -26,6 +26,9 @@ class BCTrainState:
     opt_state: optax.OptState
     step: jax.Array  # () int32, updates done
     ema_params: Params | None = None  # moving average of policy_params (None when config.ema_decay == 0)
+    # () float32, the learning rate's share that the training loop sets before each chunk (None when
+    # config.lr_end_fraction == 1: a constant rate, and the checkpoints of such runs keep their layout)
+    lr_scale: jax.Array | None = None
 
 
 def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: int) -> Learner:
@@ -35,7 +38,8 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
     def init(key: jax.Array, obs_example) -> BCTrainState:
         params = actor.init(key, obs_example)
         return BCTrainState(policy_params=params, opt_state=optimizer.init(params), step=jnp.zeros((), jnp.int32),
-                            ema_params=params if config.ema_decay > 0 else None)
+                            ema_params=params if config.ema_decay > 0 else None,
+                            lr_scale=jnp.ones((), jnp.float32) if config.lr_end_fraction < 1.0 else None)
 
     def loss_fn(params: Params, batch: Transition):
         weights = None
@@ -49,11 +53,13 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
         del key  # the loss is deterministic
         (_, metrics), grads = jax.value_and_grad(loss_fn, has_aux=True)(state.policy_params, batch)
         params, opt_state = apply_gradients(optimizer, grads, state.opt_state, state.policy_params)
+        if state.lr_scale is not None:  # Adam's step times the share: the step of the scaled learning rate
+            params = jax.tree.map(lambda old, new: old + state.lr_scale * (new - old), state.policy_params, params)
         metrics = {**metrics, "grad_norm": scalar(global_norm(grads))}
         ema = state.ema_params
         if config.ema_decay > 0:
             ema = polyak_update(params, ema, ema_weight(state.step, config.ema_decay))
-        return BCTrainState(policy_params=params, opt_state=opt_state, step=state.step + 1, ema_params=ema), metrics
+        return state.replace(policy_params=params, opt_state=opt_state, step=state.step + 1, ema_params=ema), metrics
 
     def acting_params(state: BCTrainState) -> Params:
         return state.ema_params if config.ema_decay > 0 else state.policy_params
