@@ -26,9 +26,13 @@ class BCTrainState:
     opt_state: optax.OptState
     step: jax.Array  # () int32, updates done
     ema_params: Params | None = None  # moving average of policy_params (None when config.ema_decay == 0)
-    # () float32, the learning rate's share that the training loop sets before each chunk (None when
-    # config.lr_end_fraction == 1: a constant rate, and the checkpoints of such runs keep their layout)
-    lr_scale: jax.Array | None = None
+
+
+@flax.struct.dataclass
+class ScheduledBCTrainState(BCTrainState):
+    """The state of a learner whose rate falls over the run (config.lr_end_fraction < 1): a class of its own, so
+    the checkpoints of constant-rate runs keep their layout and load as before."""
+    lr_scale: jax.Array | None = None  # () float32, the learning rate's share, set by the loop before each chunk
 
 
 def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: int) -> Learner:
@@ -37,9 +41,11 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
 
     def init(key: jax.Array, obs_example) -> BCTrainState:
         params = actor.init(key, obs_example)
-        return BCTrainState(policy_params=params, opt_state=optimizer.init(params), step=jnp.zeros((), jnp.int32),
-                            ema_params=params if config.ema_decay > 0 else None,
-                            lr_scale=jnp.ones((), jnp.float32) if config.lr_end_fraction < 1.0 else None)
+        state = BCTrainState(policy_params=params, opt_state=optimizer.init(params), step=jnp.zeros((), jnp.int32),
+                             ema_params=params if config.ema_decay > 0 else None)
+        if config.lr_end_fraction < 1.0:
+            return ScheduledBCTrainState(**vars(state), lr_scale=jnp.ones((), jnp.float32))
+        return state
 
     def loss_fn(params: Params, batch: Transition):
         weights = None
@@ -53,7 +59,7 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
         del key  # the loss is deterministic
         (_, metrics), grads = jax.value_and_grad(loss_fn, has_aux=True)(state.policy_params, batch)
         params, opt_state = apply_gradients(optimizer, grads, state.opt_state, state.policy_params)
-        if state.lr_scale is not None:  # Adam's step times the share: the step of the scaled learning rate
+        if isinstance(state, ScheduledBCTrainState):  # Adam's step times the share: the scaled learning rate's step
             params = jax.tree.map(lambda old, new: old + state.lr_scale * (new - old), state.policy_params, params)
         metrics = {**metrics, "grad_norm": scalar(global_norm(grads))}
         ema = state.ema_params
