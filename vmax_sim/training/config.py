@@ -290,7 +290,8 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # car") with 4 gradient updates per batched env step instead of BC's 8 (steadier on real scenes, 25% more env steps
 # per hour), a car that does not reverse (students backed into the car behind them at rest) and the mean action of
 # the last 4 checkpoints kept as RUN/ensemble (one checkpoint swings by 10-15 points on real scenes). The buffer keeps
-# every step of an hour: 2.9 GB, which every checkpoint carries, so checkpoints (and evaluations) come every 100k env
+# 600k steps (an hour's when it was set; hours now run up to ~870k: a 1M buffer scored alike per checkpoint on real
+# scenes, session 50): 2.9 GB, which every checkpoint carries, so checkpoints (and evaluations) come every 100k env
 # steps (~8 min here), not every 20k. 1M env steps take ~80 minutes on 2 CPU cores: `train.max_wall_minutes=60` is
 # the issue's hour. Half the training scenes are read without their traffic-light states, as most real recordings
 # come (two hours, seeds 0 and 1: held-out synthetic ensembles 94-96 -> 98-99%, V-Max 0.933-0.936 -> 0.954-0.970;
