@@ -39,9 +39,9 @@ class BCConfig:
     # steps move a closed-loop driver between checkpoints; the average keeps what the recent steps agree on
     ema_decay: float = 0.0
     # the learning rate falls linearly from lr_decay_start of the run (the larger of its env-step share and, with
-    # train.max_wall_minutes, its wall-clock share) to lr_end_fraction x learning_rate at its end (1: constant). A
-    # student's closed-loop driving moves from one checkpoint to the next; small last steps keep the end near
-    # what the run has learnt instead of where its last few thousand batches pushed it
+    # train.max_wall_minutes, its wall-clock share) to lr_end_fraction x learning_rate at its end (1: constant).
+    # Small last steps keep the end near what the run has learnt: from 600k to 0.1x at 870.8k it steadied the
+    # held-out synthetic scores, not the real scenes' (docs/learning.md, session 50)
     lr_end_fraction: float = 1.0
     lr_decay_start: float = 0.5
     # network
