@@ -47,20 +47,19 @@ def test_the_wall_clock_budget_stops_with_a_final_checkpoint_and_evaluation(synt
 def test_the_learning_rate_falls_with_the_run_by_steps_or_by_the_clock():
     """BC's `algo.lr_end_fraction`: the loop sets the share from the run's progress, the larger of its step share
     and its wall-clock share; a run with a constant rate is left as it is."""
-    import flax.struct
     import jax.numpy as jnp
 
     from vmax_sim.agents.bc.learner import BCTrainState, ScheduledBCTrainState
+    from vmax_sim.training.loop import TrainCarry
     from vmax_sim.training.run import run_progress, with_learning_rate_share
 
-    @flax.struct.dataclass
-    class Carry:  # what the loop reads of a TrainCarry
-        learner: BCTrainState | ScheduledBCTrainState
+    def carry_of(learner) -> TrainCarry:  # the loop reads only the learner of its carry
+        return TrainCarry(learner=learner, env=None, buffer=None, key=None, env_steps=jnp.int32(0))
 
     config = tiny_config(Path("shards"), "bc", "train.total_env_steps=1000", "train.max_wall_minutes=10",
                          "algo.lr_end_fraction=0.2", "algo.lr_decay_start=0.5")
     assert run_progress(config, 250, 0.0) == 0.25 and run_progress(config, 250, 450.0) == 0.75
-    carry = Carry(ScheduledBCTrainState(policy_params={}, opt_state=(), step=jnp.int32(0), lr_scale=jnp.float32(1.0)))
+    carry = carry_of(ScheduledBCTrainState(policy_params={}, opt_state=(), step=jnp.int32(0), lr_scale=jnp.float32(1.0)))
 
     def share(steps: int, wall_s: float) -> float:
         return float(with_learning_rate_share(carry, config, steps, wall_s).learner.lr_scale)
@@ -68,7 +67,7 @@ def test_the_learning_rate_falls_with_the_run_by_steps_or_by_the_clock():
     assert share(400, 0.0) == 1.0  # before the decay starts
     assert share(750, 0.0) == pytest.approx(0.6) and share(100, 450.0) == pytest.approx(0.6)  # halfway down
     assert share(1000, 0.0) == pytest.approx(0.2) and share(0, 900.0) == pytest.approx(0.2)
-    constant = Carry(BCTrainState(policy_params={}, opt_state=(), step=jnp.int32(0)))
+    constant = carry_of(BCTrainState(policy_params={}, opt_state=(), step=jnp.int32(0)))
     assert with_learning_rate_share(constant, config, 1000, 900.0) is constant
 
 
