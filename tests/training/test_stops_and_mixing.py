@@ -59,7 +59,8 @@ def test_the_learning_rate_falls_with_the_run_by_steps_or_by_the_clock():
     config = tiny_config(Path("shards"), "bc", "train.total_env_steps=1000", "train.max_wall_minutes=10",
                          "algo.lr_end_fraction=0.2", "algo.lr_decay_start=0.5")
     assert run_progress(config, 250, 0.0) == 0.25 and run_progress(config, 250, 450.0) == 0.75
-    carry = carry_of(ScheduledBCTrainState(policy_params={}, opt_state=(), step=jnp.int32(0), lr_scale=jnp.float32(1.0)))
+    carry = carry_of(ScheduledBCTrainState(policy_params={}, opt_state=(), step=jnp.int32(0),
+                                           lr_scale=jnp.float32(1.0)))
 
     def share(steps: int, wall_s: float) -> float:
         return float(with_learning_rate_share(carry, config, steps, wall_s).learner.lr_scale)
