@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from scenariomax.schema import OBJECT_TYPE_CYCLIST, OBJECT_TYPE_PEDESTRIAN, OBJECT_TYPE_VEHICLE
+from scenariomax.schema import OBJECT_TYPE_CYCLIST, OBJECT_TYPE_OTHER, OBJECT_TYPE_PEDESTRIAN, OBJECT_TYPE_VEHICLE
 from scenariomax.sources.synthetic.knobs import DEFAULT_KNOBS, SyntheticKnobs
 
 
@@ -47,6 +47,18 @@ def cyclist_body(rng: np.random.Generator) -> Body:
 def pedestrian_body(rng: np.random.Generator) -> Body:
     return Body(OBJECT_TYPE_PEDESTRIAN, float(rng.uniform(0.5, 0.7)), float(rng.uniform(0.5, 0.7)),
                 float(rng.uniform(1.5, 1.9)))
+
+
+def cone_body(rng: np.random.Generator) -> Body:
+    """A traffic cone or bollard (real nuScenes cones are logged 0.3-0.65 m a side)."""
+    side = float(rng.uniform(0.3, 0.7))
+    return Body(OBJECT_TYPE_OTHER, side, side * float(rng.uniform(0.9, 1.1)), float(rng.uniform(0.5, 1.1)))
+
+
+def barrier_body(rng: np.random.Generator) -> Body:
+    """A road barrier, logged as real nuScenes ones are: 0.4-0.55 m long along its heading, 2.9-3.6 m wide."""
+    return Body(OBJECT_TYPE_OTHER, float(rng.uniform(0.35, 0.55)), float(rng.uniform(2.8, 3.6)),
+                float(rng.uniform(0.8, 1.1)))
 
 
 # A vehicle driver's traits, in Driver's order: the range each is drawn from, and the floor and ceiling

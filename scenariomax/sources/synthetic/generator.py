@@ -19,12 +19,14 @@ from scenariomax.sources.synthetic.checks import overlaps_others
 from scenariomax.sources.synthetic.knobs import DEFAULT_KNOBS, SyntheticKnobs
 from scenariomax.sources.synthetic.network import RoadNetwork
 from scenariomax.sources.synthetic.signals import signal_states
+from scenariomax.sources.synthetic.street_objects import with_street_objects
 from scenariomax.sources.synthetic.topologies import build_network
 from scenariomax.sources.synthetic.traffic import DT_S, Traffic, simulate
 
 SOURCE_DATASET = "synthetic"
 MAX_ATTEMPTS = 4  # fresh networks tried when a simulation offers no usable SDC
 SDC_BOX_STREAM = 5  # the SDC box's draw has a stream of its own: every other draw stays as without the knobs
+STREET_OBJECT_STREAM = 6  # so have the street objects' (knob street_objects)
 FIRST_OBJECT_ID = 1000
 
 
@@ -43,9 +45,12 @@ def generate_scenario(seed: int, index: int, sizes: Sizes | None = None, topolog
     sizes = sizes or Sizes()
     knobs = knobs or DEFAULT_KNOBS
     rng = np.random.default_rng([int(seed), int(index)])
+    street_rng = np.random.default_rng([int(seed), int(index), STREET_OBJECT_STREAM])
     for _ in range(MAX_ATTEMPTS):
         network = build_network(rng, topology, knobs)
         traffic = simulate(network, rng, sizes.num_timesteps, knobs)
+        if knobs.street_objects[1] > 0:
+            traffic = with_street_objects(traffic, network, street_rng, knobs.street_objects)
         sdc = _choose_sdc(network, traffic, rng, sizes, knobs)
         if sdc is not None:
             box_share = np.random.default_rng([int(seed), int(index), SDC_BOX_STREAM]).uniform()

@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 import scenariomax
 from scenariomax.scenario import array_fields
-from scenariomax.schema import LANE_TYPES, OBJECT_TYPE_PEDESTRIAN, OBJECT_TYPE_VEHICLE, Sizes
+from scenariomax.schema import LANE_TYPES, OBJECT_TYPE_OTHER, OBJECT_TYPE_PEDESTRIAN, OBJECT_TYPE_VEHICLE, Sizes
 from scenariomax.sources.synthetic import (
     TOPOLOGIES,
     SyntheticKnobs,
@@ -23,6 +23,7 @@ from scenariomax.sources.synthetic import (
     overlapping_vehicle_pairs,
     red_light_crossings,
 )
+from scenariomax.sources.synthetic.checks import road_edge_signed_distance
 from scenariomax.sources.synthetic.generator import STANDING_MPS, WAIT_STEPS
 from scenariomax.sources.synthetic.knobs import TOPOLOGY_NAMES
 
@@ -224,6 +225,36 @@ def test_parked_reach_brings_parked_cars_nearer_the_lanes_and_keeps_the_rest_of_
     assert (nearer > 0.5).sum() >= 10 and np.median(nearer) >= 0.3 and nearer.min() >= -1e-3, np.round(nearer, 2)
 
 
+def _pairs_touching_street_objects(scenario) -> list:
+    """Overlapping boxes (any types) where one of the two is a street object (type other)."""
+    pairs = overlapping_vehicle_pairs(scenario, types=(1, 2, 3, OBJECT_TYPE_OTHER))
+    return [p for p in pairs if OBJECT_TYPE_OTHER in scenario.object_type[list(p[:2])]]
+
+
+def test_street_objects_stand_along_the_road_edges_clear_of_the_log_and_keep_the_rest_of_the_scene():
+    counts = []
+    for i, topology in enumerate(TOPOLOGIES):
+        base = generate_scenario(21, i, SIZES, topology=topology)
+        street = generate_scenario(21, i, SIZES, topology=topology, knobs=SyntheticKnobs(street_objects=(6, 10)))
+        assert not (base.object_type == OBJECT_TYPE_OTHER).any()
+        rows = np.flatnonzero(street.object_type == OBJECT_TYPE_OTHER)
+        counts.append(len(rows))
+        # standing still for the whole log, cone- or barrier-sized
+        assert street.valid[rows].all() and (street.speed[rows] == 0).all()
+        assert (np.ptp(street.x[rows], axis=1) == 0).all() and (np.ptp(street.y[rows], axis=1) == 0).all()
+        assert (street.length[rows] <= 0.7).all() and (street.width[rows] <= 3.6).all()
+        # along the road edges: on the road or just off it
+        edge = road_edge_signed_distance(street, np.stack([street.x[rows, 0], street.y[rows, 0]], axis=1))
+        assert (np.abs(edge) <= 1.6).all(), np.round(edge, 2)
+        # nothing logged touches them, and every other object is the knob-off scene's (their draws are their own)
+        assert _pairs_touching_street_objects(street) == [] and street.validate() == []
+        shared, rows_base, rows_street = np.intersect1d(base.object_id, street.object_id, return_indices=True)
+        assert len(shared) >= base.num_objects - len(rows)  # the budget may drop the farthest for them
+        for name in ("x", "y", "bbox_yaw", "speed", "valid", "object_type"):
+            assert np.array_equal(getattr(base, name)[rows_base], getattr(street, name)[rows_street]), name
+    assert sum(counts) >= 4 * len(TOPOLOGIES) and max(counts) <= 10, counts
+
+
 def test_walkers_per_crosswalk_sets_how_many_cross():
     def pedestrians(walkers):
         knobs = SyntheticKnobs(walkers_per_crosswalk=walkers)
@@ -347,7 +378,7 @@ def test_driver_style_spread_widens_the_traits_around_their_centres():
     ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"),
     ({"sdc_slow_start": -0.1}, "sdc_slow_start"), ({"sdc_waits": 1.5}, "sdc_waits"),
     ({"slow_vehicles": 2.0}, "slow_vehicles"), ({"sdc_width_m": 3.5}, "sdc_width_m"),
-    ({"sdc_length_m": -1.0}, "sdc_length_m"),
+    ({"sdc_length_m": -1.0}, "sdc_length_m"), ({"street_objects": (5.0, 2.0)}, "street_objects"),
 ])
 def test_bad_knobs_raise_one_line_naming_the_knob(kwargs, name):
     with pytest.raises(ValueError, match=name) as caught:
@@ -429,11 +460,14 @@ def test_convert_command_rejects_bad_knobs_in_one_line(tmp_path, args, words):
     SyntheticKnobs(sdc_waits=1.0, sdc_slow_start=1.0, traffic_density=3.0),
     SyntheticKnobs(slow_vehicles=1.0, traffic_density=3.0, sdc_slow_start=1.0),
     SyntheticKnobs(sdc_length_m=8.0, sdc_width_m=3.0, traffic_density=3.0, parked_reach=(1.5, 1.5)),
+    SyntheticKnobs(street_objects=(64.0, 64.0), traffic_density=3.0, parked_fraction=(1.0, 1.0), max_parked=48,
+                   walkers_per_crosswalk=(4.0, 8.0)),
 ])
 def test_extreme_knobs_keep_the_logs_safe(knobs):
     """At the knobs' limits vehicles still never overlap nor run a red light, and the scenarios validate."""
     for i, topology in enumerate(TOPOLOGIES):
         s = generate_scenario(13, i, SIZES, topology=topology, knobs=knobs)
         assert s.validate() == [] and overlapping_vehicle_pairs(s) == [], topology
+        assert _pairs_touching_street_objects(s) == [], topology
         vehicles = np.flatnonzero(s.object_type == OBJECT_TYPE_VEHICLE)
         assert not any(red_light_crossings(s, obj) for obj in vehicles), topology
