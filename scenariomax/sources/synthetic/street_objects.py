@@ -26,6 +26,8 @@ GROUP_SIZE = {"cones": (1, 5), "barriers": (2, 8)}
 TRIES_PER_OBJECT = 4  # groups tried for each object wanted before giving up (crowded scenes)
 EDGE_SPACING_M = 0.5
 
+Box = tuple[float, float, float, ag.Body]  # a street object: x, y, yaw and its body
+
 
 def with_street_objects(traffic: Traffic, network: RoadNetwork, rng: np.random.Generator,
                         count_range: tuple[float, float]) -> Traffic:
@@ -39,7 +41,7 @@ def with_street_objects(traffic: Traffic, network: RoadNetwork, rng: np.random.G
         return traffic
     lengths = np.array([geo.arc_length(xy)[-1] for xy in edges])
     blocking = _logged_boxes(traffic)
-    placed: list[tuple[float, float, float, ag.Body]] = []
+    placed: list[Box] = []
     for _ in range(TRIES_PER_OBJECT * wanted):
         if len(placed) >= wanted:
             break
@@ -51,7 +53,7 @@ def with_street_objects(traffic: Traffic, network: RoadNetwork, rng: np.random.G
     return _appended(traffic, placed) if placed else traffic
 
 
-def _group_along(edge_xy: np.ndarray, rng: np.random.Generator) -> list[tuple[float, float, float, ag.Body]]:
+def _group_along(edge_xy: np.ndarray, rng: np.random.Generator) -> list[Box]:
     """One group's boxes (x, y, yaw, body) along a road edge, the drivable area on its left."""
     kind = "cones" if rng.random() < 0.5 else "barriers"
     count = int(rng.integers(GROUP_SIZE[kind][0], GROUP_SIZE[kind][1] + 1))
@@ -82,14 +84,14 @@ def _logged_boxes(traffic: Traffic) -> dict[str, np.ndarray]:
             "length": traffic.length[objects], "width": traffic.width[objects]}
 
 
-def _with_box(boxes: dict[str, np.ndarray], box: tuple[float, float, float, ag.Body]) -> dict[str, np.ndarray]:
+def _with_box(boxes: dict[str, np.ndarray], box: Box) -> dict[str, np.ndarray]:
     """`boxes` with one more (a street object placed)."""
     x, y, yaw, body = box
     added = {"x": x, "y": y, "yaw": yaw, "length": body.length, "width": body.width}
     return {name: np.append(values, added[name]) for name, values in boxes.items()}
 
 
-def _is_clear(box: tuple[float, float, float, ag.Body], boxes: dict[str, np.ndarray]) -> bool:
+def _is_clear(box: Box, boxes: dict[str, np.ndarray]) -> bool:
     """Whether `box`, grown by CLEARANCE_M on every side, touches none of `boxes`."""
     x, y, yaw, body = box
     grown_length, grown_width = body.length + 2 * CLEARANCE_M, body.width + 2 * CLEARANCE_M
@@ -105,7 +107,7 @@ def _is_clear(box: tuple[float, float, float, ag.Body], boxes: dict[str, np.ndar
     return not bool(boxes_overlap(mine, theirs).any())
 
 
-def _appended(traffic: Traffic, placed: list[tuple[float, float, float, ag.Body]]) -> Traffic:
+def _appended(traffic: Traffic, placed: list[Box]) -> Traffic:
     """`traffic` with the placed boxes as parked objects standing at every step."""
     steps, count = traffic.x.shape[1], len(placed)
     x, y, yaw = (np.array([box[i] for box in placed]) for i in range(3))

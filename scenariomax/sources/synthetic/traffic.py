@@ -44,7 +44,7 @@ YIELD_HORIZON_S = 5.0
 
 @dataclasses.dataclass(frozen=True)
 class Traffic:
-    """Logged objects (movers, then pedestrians, then parked cars)."""
+    """Logged objects (movers, then pedestrians, then parked cars; street objects, when on, after them as parked)."""
 
     object_type: np.ndarray  # (N,) int64
     length: np.ndarray  # (N,) float64
