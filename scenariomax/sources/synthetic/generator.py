@@ -49,8 +49,7 @@ def generate_scenario(seed: int, index: int, sizes: Sizes | None = None, topolog
     for _ in range(MAX_ATTEMPTS):
         network = build_network(rng, topology, knobs)
         traffic = simulate(network, rng, sizes.num_timesteps, knobs)
-        if knobs.street_objects[1] > 0:
-            traffic = with_street_objects(traffic, network, street_rng, knobs.street_objects)
+        traffic = with_street_objects(traffic, network, street_rng, knobs.street_objects)
         sdc = _choose_sdc(network, traffic, rng, sizes, knobs)
         if sdc is not None:
             box_share = np.random.default_rng([int(seed), int(index), SDC_BOX_STREAM]).uniform()

@@ -34,10 +34,12 @@ def with_street_objects(traffic: Traffic, network: RoadNetwork, rng: np.random.G
     """`traffic` with a number (drawn uniformly in `count_range`) of cones and barriers appended as parked objects
     of type other, standing for the whole log."""
     low, high = (int(round(v)) for v in count_range)
-    wanted = int(rng.integers(low, high + 1)) if high > 0 else 0
+    wanted = int(rng.integers(low, high + 1)) if high > 0 else 0  # off: nothing drawn
+    if wanted == 0:
+        return traffic
     edges = [geo.resample(edge.xyz[:, :2].astype(np.float64), EDGE_SPACING_M) for edge in network.edges]
     edges = [xy for xy in edges if len(xy) >= 4]
-    if wanted == 0 or not edges:
+    if not edges:
         return traffic
     lengths = np.array([geo.arc_length(xy)[-1] for xy in edges])
     blocking = _logged_boxes(traffic)

@@ -12,7 +12,14 @@ from click.testing import CliRunner
 
 import scenariomax
 from scenariomax.scenario import array_fields
-from scenariomax.schema import LANE_TYPES, OBJECT_TYPE_OTHER, OBJECT_TYPE_PEDESTRIAN, OBJECT_TYPE_VEHICLE, Sizes
+from scenariomax.schema import (
+    LANE_TYPES,
+    OBJECT_TYPE_CYCLIST,
+    OBJECT_TYPE_OTHER,
+    OBJECT_TYPE_PEDESTRIAN,
+    OBJECT_TYPE_VEHICLE,
+    Sizes,
+)
 from scenariomax.sources.synthetic import (
     TOPOLOGIES,
     SyntheticKnobs,
@@ -227,7 +234,8 @@ def test_parked_reach_brings_parked_cars_nearer_the_lanes_and_keeps_the_rest_of_
 
 def _pairs_touching_street_objects(scenario) -> list:
     """Overlapping boxes (any types) where one of the two is a street object (type other)."""
-    pairs = overlapping_vehicle_pairs(scenario, types=(1, 2, 3, OBJECT_TYPE_OTHER))
+    pairs = overlapping_vehicle_pairs(scenario, types=(OBJECT_TYPE_VEHICLE, OBJECT_TYPE_PEDESTRIAN,
+                                                           OBJECT_TYPE_CYCLIST, OBJECT_TYPE_OTHER))
     return [p for p in pairs if OBJECT_TYPE_OTHER in scenario.object_type[list(p[:2])]]
 
 
