@@ -165,6 +165,48 @@ def test_bc_learning_rate_share_scales_each_step():
         get_config("bc", "debug", lr_decay_start=1.0)
 
 
+def test_bc_members_learn_apart_and_act_as_one():
+    """`members` M: M students from their own initialisations, each stepping on its own minibatch of the batch (its
+    step the one a single student takes on that minibatch), acting with the mean of their actions."""
+    obs_example = toy.observe(toy.reset(jax.random.key(0), 2))
+    single = make_learner("bc", get_config("bc", "debug", learning_rate=1e-3), lambda: toy.ToyEncoder(16),
+                          toy.ACTION_DIM)
+    pair = make_learner("bc", get_config("bc", "debug", learning_rate=1e-3, members=2), lambda: toy.ToyEncoder(16),
+                        toy.ACTION_DIM)
+    state = pair.init(jax.random.key(0), obs_example)
+    leaves = jax.tree.leaves
+    assert all(leaf.shape[0] == 2 for leaf in leaves(state.policy_params))
+    assert any(bool(jnp.any(leaf[0] != leaf[1])) for leaf in leaves(state.policy_params))  # their own initialisations
+    batch = toy.random_batch(jax.random.key(1), 2 * 32)  # one minibatch of 32 per member
+    stepped, metrics = jax.jit(pair.update)(state, batch, jax.random.key(2))
+    for member in range(2):
+        def own(tree, m=member):
+            return jax.tree.map(lambda leaf: leaf[m], tree)
+
+        alone_state = state.replace(policy_params=own(state.policy_params), opt_state=own(state.opt_state))
+        rows = jax.tree.map(lambda leaf, m=member: leaf[32 * m:32 * (m + 1)], batch)
+        alone, _ = jax.jit(single.update)(alone_state, rows, jax.random.key(2))
+        for got, want in zip(leaves(own(stepped.policy_params)), leaves(alone.policy_params)):
+            np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7)
+    assert metrics["bc_loss"].shape == ()
+    held_out = toy.random_batch(jax.random.key(5), 8)
+    key, params = jax.random.key(0), pair.policy_params(stepped)
+    each = [single.act(jax.tree.map(lambda leaf, m=m: leaf[m], params), held_out.obs, key, True) for m in range(2)]
+    np.testing.assert_allclose(pair.act(params, held_out.obs, key, True), np.mean(each, axis=0), rtol=1e-5,
+                               atol=1e-7)
+
+    @jax.jit
+    def train(state):  # and together they learn the toy expert as one student does
+        return jax.lax.scan(lambda s, k: pair.update(s, toy.random_batch(k, 2 * 128), k), state,
+                            jax.random.split(jax.random.key(1), 1000))
+
+    params = pair.policy_params(train(pair.init(jax.random.key(0), obs_example))[0])
+    action = pair.act(params, toy.random_batch(jax.random.key(5), 1000).obs, key, True)
+    assert float(jnp.mean(jnp.abs(action - toy.random_batch(jax.random.key(5), 1000).expert_action))) < 0.03
+    with pytest.raises(ValueError, match="members"):
+        get_config("bc", "debug", members=0)
+
+
 def test_bc_sac_schedule():
     steps = jnp.arange(6)
     np.testing.assert_allclose(jax.vmap(lambda s: bc_weight_at(s, 2, 0.7))(steps), [0.7, 0, 0.7, 0, 0.7, 0],

@@ -80,3 +80,19 @@ def test_ensemble_members_can_come_oftener_than_checkpoints(synthetic_shards, tm
     assert len(members) == 3 and members[-1] == result.env_steps
     assert all(later - earlier >= 16 for earlier, later in zip(members, members[1:]))
     assert result.summary["ensemble_evaluation"]["members"] == members
+
+
+@pytest.mark.slow  # ~60 s on 2 cores (a tiny BC run of two students and its evaluation)
+def test_a_run_of_several_bc_members_saves_them_and_evaluates_them_as_one(synthetic_shards, tmp_path):
+    """`algo.members=2`: the run trains two students on one buffer; its checkpoint holds both, stacked, and the
+    loaded policy drives with the mean of their actions."""
+    config = tiny_config(synthetic_shards, "bc", "algo.members=2", "train.total_env_steps=48", "train.chunk_steps=2",
+                         "train.checkpoint_every=1000", "train.keep_best=false")
+    run = tmp_path / "run"
+    result = train(config, run, progress=False, print_fn=lambda line: None)
+    assert result.env_steps >= 48
+    loaded = load_trained_policy(run)
+    first = jax.tree.leaves(loaded.params)[0]
+    assert first.shape[0] == 2 and not np.allclose(first[0], first[1])  # two students, each its own
+    evaluated = evaluate_run(run, num_scenarios=4, batch_size=4)
+    assert 0.0 <= evaluated.summary["accuracy"] <= 1.0 and evaluated.summary["num_episodes"] == 4

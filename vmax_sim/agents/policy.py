@@ -42,3 +42,19 @@ def make_act_fns(dist_fn: Callable[[Params, object], D.TanhGaussian]):
         return action, {"log_prob": D.log_prob(dist, action)}
 
     return act, act_with_info
+
+
+def mean_of_members(act: Callable) -> tuple[Callable, Callable]:
+    """(act, act_with_info) of several policies driving as one: `act`'s parameters stacked on a leading member axis
+    (M, ...), the action the mean of the members' actions (B, A). A mean of members has no density: the info's
+    log_prob is 0."""
+
+    def mean_act(params: Params, obs, key: jax.Array, deterministic=False) -> jax.Array:
+        actions = jax.vmap(lambda member: act(member, obs, key, deterministic))(params)  # (M, B, A)
+        return jnp.mean(actions, axis=0)
+
+    def mean_act_with_info(params: Params, obs, key: jax.Array, deterministic=False):
+        action = mean_act(params, obs, key, deterministic)
+        return action, {"log_prob": jnp.zeros(action.shape[:1], action.dtype)}
+
+    return mean_act, mean_act_with_info

@@ -17,6 +17,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
+from vmax_sim.agents.policy import mean_of_members
 from vmax_sim.agents.types import Learner
 from vmax_sim.training.checkpoint import CheckpointStore, write_policy_directory
 
@@ -37,14 +38,7 @@ def stack_params(members: list) -> object:
 def ensemble_learner(learner: Learner) -> Learner:
     """`learner` whose act takes stacked parameters (M, ...) and returns the mean of the M members' actions (B, A).
     Only acting changes: the ensemble is a driver, not something to train."""
-    def act(params, observation, key, deterministic):
-        actions = jax.vmap(lambda member: learner.act(member, observation, key, deterministic))(params)
-        return jnp.mean(actions, axis=0)
-
-    def act_with_info(params, observation, key, deterministic=False):
-        action = act(params, observation, key, deterministic)
-        return action, {"log_prob": jnp.zeros(action.shape[:1], action.dtype)}  # no density for a mean of members
-
+    act, act_with_info = mean_of_members(learner.act)
     return learner._replace(act=act, act_with_info=act_with_info, value=None)
 
 

@@ -69,6 +69,11 @@ def _sum_stats(stats: dict[str, jax.Array]) -> dict[str, jax.Array]:
     return {name: jnp.sum(values) for name, values in stats.items()}
 
 
+def update_batch_size(algo_config) -> int:
+    """Transitions sampled per learner update: batch_size, once for each of BC's members (`members`)."""
+    return algo_config.batch_size * getattr(algo_config, "members", 1)
+
+
 def _updates(learner: Learner, learner_state, buffer: TransitionReplay, key: jax.Array, num_updates: int,
              batch_size: int):
     """`num_updates` learner updates on device-sampled batches -> (state, mean metrics)."""
@@ -130,7 +135,7 @@ def make_off_policy_chunk(env: LearningEnv, learner: Learner, algo: str, algo_co
 
         def learn(state):
             return _updates(learner, state, buffer, update_key, algo_config.updates_per_step,
-                            algo_config.batch_size)
+                            update_batch_size(algo_config))
 
         def wait(state):
             return state, jax.tree.map(jnp.zeros_like, metrics_template)

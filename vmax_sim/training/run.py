@@ -66,6 +66,7 @@ from vmax_sim.training.loop import (
     make_off_policy_chunk,
     make_on_policy_chunk,
     transition_of,
+    update_batch_size,
 )
 from vmax_sim.training.memory import release_freed_memory
 from vmax_sim.training.parallel import data_mesh, replay_shardings, replicated_placer, shard_carry
@@ -148,7 +149,8 @@ def _chunk_function(config: TrainConfig, learner, env: LearningEnv, shapes):
     algo_config = config.algo_config
     if config.algo in OFF_POLICY:
         learner_shapes, example = shapes
-        sample = jax.tree.map(lambda a: jax.ShapeDtypeStruct((algo_config.batch_size,) + a.shape, a.dtype), example)
+        sample = jax.tree.map(lambda a: jax.ShapeDtypeStruct((update_batch_size(algo_config),) + a.shape, a.dtype),
+                              example)
         template = jax.eval_shape(lambda s, b, k: learner.update(s, b, k)[1], learner_shapes, sample,
                                   jax.random.PRNGKey(0))
         template = jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), template)

@@ -44,6 +44,11 @@ class BCConfig:
     # held-out synthetic scores, not the real scenes' (docs/learning.md, session 50)
     lr_end_fraction: float = 1.0
     lr_decay_start: float = 0.5
+    # independent students trained side by side on the same replay buffer, each from its own initialisation and on
+    # minibatches of its own (batch_size each); they act as one, with the mean of their actions (1: one student).
+    # A run's checkpoints 100k env steps apart fail different real scenes (docs/learning.md), but they share their
+    # weights' history; members that share only the data err more independently of each other
+    members: int = 1
     # network
     policy_hidden_sizes: tuple[int, ...] = (256, 64, 32)
     activation: str = "relu"
@@ -70,7 +75,7 @@ class BCConfig:
     def __post_init__(self):
         check_positive(self, "learning_rate", "num_envs", "batch_size", "updates_per_step", "unroll_length",
                        "buffer_size", "expert_action_eps", "standing_weight", "pull_away_weight",
-                       "standing_speed")
+                       "standing_speed", "members")
         if not 0.0 <= self.lr_end_fraction <= 1.0:
             raise ValueError(f"lr_end_fraction must be in [0, 1], got {self.lr_end_fraction}")
         if not 0.0 <= self.lr_decay_start < 1.0:

@@ -2,6 +2,9 @@
 
 One `update` is one Adam step on `bc_loss` over a batch of Transitions (obs, expert_action used), then (when
 `config.ema_decay` > 0) one step of the parameters' moving average, which is then the policy that acts.
+With `config.members` M > 1 every parameter and optimiser leaf carries a leading member axis (M, ...), the batch
+holds M minibatches one after the other (M * batch_size rows), each member takes its own step on its own, and the
+members act as one (the mean of their actions).
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from vmax_sim.agents.bc.losses import bc_loss, standing_weights
 from vmax_sim.agents.bc.networks import make_networks
 from vmax_sim.agents.common import apply_gradients, ema_weight, global_norm, make_optimizer, polyak_update, scalar
 from vmax_sim.agents.networks import EncoderFactory
-from vmax_sim.agents.policy import make_act_fns
+from vmax_sim.agents.policy import make_act_fns, mean_of_members
 from vmax_sim.agents.types import Learner, Metrics, Params, Transition
 
 
@@ -38,10 +41,18 @@ class ScheduledBCTrainState(BCTrainState):
 def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: int) -> Learner:
     actor = make_networks(config, encoder_factory, action_dim)
     optimizer = make_optimizer(config.learning_rate, config.max_grad_norm)
+    members = config.members
+
+    def init_member(key: jax.Array, obs_example):
+        params = actor.init(key, obs_example)
+        return params, optimizer.init(params)
 
     def init(key: jax.Array, obs_example) -> BCTrainState:
-        params = actor.init(key, obs_example)
-        state = BCTrainState(policy_params=params, opt_state=optimizer.init(params), step=jnp.zeros((), jnp.int32),
+        if members == 1:
+            params, opt_state = init_member(key, obs_example)
+        else:  # each member from its own initialisation
+            params, opt_state = jax.vmap(init_member, in_axes=(0, None))(jax.random.split(key, members), obs_example)
+        state = BCTrainState(policy_params=params, opt_state=opt_state, step=jnp.zeros((), jnp.int32),
                              ema_params=params if config.ema_decay > 0 else None)
         if config.lr_end_fraction < 1.0:
             return ScheduledBCTrainState(**vars(state), lr_scale=jnp.ones((), jnp.float32))
@@ -55,13 +66,21 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
         return bc_loss(actor.apply(params, batch.obs), batch.expert_action, config.nll_weight, config.mse_weight,
                        config.expert_action_eps, weights)
 
+    def member_step(params: Params, opt_state, batch: Transition):
+        (_, metrics), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch)
+        new_params, opt_state = apply_gradients(optimizer, grads, opt_state, params)
+        return new_params, opt_state, {**metrics, "grad_norm": scalar(global_norm(grads))}
+
     def update(state: BCTrainState, batch: Transition, key: jax.Array) -> tuple[BCTrainState, Metrics]:
         del key  # the loss is deterministic
-        (_, metrics), grads = jax.value_and_grad(loss_fn, has_aux=True)(state.policy_params, batch)
-        params, opt_state = apply_gradients(optimizer, grads, state.opt_state, state.policy_params)
+        if members == 1:
+            params, opt_state, metrics = member_step(state.policy_params, state.opt_state, batch)
+        else:  # (M * B, ...) rows -> M minibatches (M, B, ...), one per member; the metrics their mean
+            minibatches = jax.tree.map(lambda x: x.reshape((members, -1) + x.shape[1:]), batch)
+            params, opt_state, metrics = jax.vmap(member_step)(state.policy_params, state.opt_state, minibatches)
+            metrics = jax.tree.map(jnp.mean, metrics)
         if isinstance(state, ScheduledBCTrainState):  # Adam's step times the share: the scaled learning rate's step
             params = jax.tree.map(lambda old, new: old + state.lr_scale * (new - old), state.policy_params, params)
-        metrics = {**metrics, "grad_norm": scalar(global_norm(grads))}
         ema = state.ema_params
         if config.ema_decay > 0:
             ema = polyak_update(params, ema, ema_weight(state.step, config.ema_decay))
@@ -71,5 +90,7 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
         return state.ema_params if config.ema_decay > 0 else state.policy_params
 
     act, act_with_info = make_act_fns(actor.apply)
+    if members > 1:
+        act, act_with_info = mean_of_members(act)
     return Learner(init=init, update=update, act=act, policy_params=acting_params, act_with_info=act_with_info,
                    value=None)
