@@ -54,7 +54,12 @@ def test_bc_row_weights_hand_value_and_standing_rows():
     # whose label moves off weighs pull_away_weight, one whose label holds standing_weight
     sdc = jnp.zeros((4, 2, 6)).at[0, -1, 2].set(0.01).at[1, -1, 3].set(0.03).at[2, 0, 2].set(0.5)
     labels = jnp.array([[0.0, 0.0], [0.3, 0.0], [0.0, 0.0], [0.3, 0.0]])
-    np.testing.assert_allclose(bc_losses.standing_weights(sdc, labels, 0.5 / 30, 4.0, 0.05, 7.0), [4, 1, 4, 7])
+    np.testing.assert_allclose(bc_losses.row_weights(sdc, labels, 0.5 / 30, 4.0, 0.05, 7.0), [4, 1, 4, 7])
+    # a moving row whose label brakes (below braking_accel) weighs braking_weight; a standing one whose label brakes
+    # holds (standing_weight), and a moving one that brakes gently weighs 1
+    braking = jnp.array([[-0.5, 0.0], [-0.5, 0.0], [-0.1, 0.0], [0.3, 0.0]])
+    np.testing.assert_allclose(bc_losses.row_weights(sdc, braking, 0.5 / 30, 4.0, 0.05, 7.0, -0.2, 5.0),
+                               [4, 5, 4, 7])
 
 
 @flax.struct.dataclass
@@ -87,6 +92,31 @@ def test_bc_pull_away_weight_pulls_the_fit_towards_the_standing_labels():
     np.testing.assert_allclose(fitted_mean_action(standing_weight=9.0), plain, atol=1e-5)
     with pytest.raises(ValueError, match="pull_away_weight"):
         get_config("bc", "debug", pull_away_weight=0.0)
+
+
+def test_bc_braking_weight_pulls_the_fit_towards_the_braking_labels():
+    # moving rows that look alike, a quarter labelled -0.6 (the teacher brakes), the rest +0.2: weighting the braking
+    # rows 9 : 1 brings the fitted action from the rows' mean towards the brake
+    size = 64
+    brakes = jnp.arange(size) % 4 == 0
+    sdc = jnp.zeros((size, 1, 6)).at[:, 0, 2].set(8.0 / 30)
+    labels = jnp.where(brakes, -0.6, 0.2)[:, None]
+    batch = Transition.make(obs=_SdcOnly(sdc=sdc), action=jnp.zeros((size, 1)), reward=jnp.zeros(size),
+                            discount=jnp.ones(size), next_obs=_SdcOnly(sdc=sdc), expert_action=labels)
+
+    def fitted_mean_action(**weights):
+        config = get_config("bc", "debug", learning_rate=1e-3, **weights)
+        learner = make_learner("bc", config, lambda: toy.ToyEncoder(8), 1)
+        state = learner.init(jax.random.key(0), batch.obs)
+        keys = jax.random.split(jax.random.key(1), 300)
+        state, _ = jax.lax.scan(lambda s, k: learner.update(s, batch, k), state, keys)
+        return float(jnp.mean(learner.act(learner.policy_params(state), batch.obs, jax.random.key(0), True)))
+
+    plain = fitted_mean_action()
+    assert plain > -0.1  # the unweighted fit sits near the rows' mean (0.0) or above it
+    assert fitted_mean_action(braking_weight=9.0) < plain - 0.2
+    with pytest.raises(ValueError, match="braking_weight"):
+        get_config("bc", "debug", braking_weight=-1.0)
 
 
 def test_bc_learns_the_toy_expert():

@@ -34,6 +34,11 @@ class BCConfig:
     pull_away_weight: float = 1.0
     standing_speed: float = 0.5 / 30.0
     pull_away_accel: float = 0.05
+    # and of the rows where the SDC moves and the label brakes (acceleration below braking_accel, normalised): the
+    # teacher brakes at ~2% of its moving steps, and the students' at-fault collisions on real scenes are mostly steps
+    # where it braked and they drove on (a crossing stream, a car that stops ahead; docs/learning.md, session 52)
+    braking_weight: float = 1.0
+    braking_accel: float = -0.2
     # decay of an exponential moving average of the policy parameters, updated after every gradient step; when
     # > 0 the average is the policy that acts, is evaluated and is saved (0: the raw parameters). Small-batch
     # steps move a closed-loop driver between checkpoints; the average keeps what the recent steps agree on
@@ -75,7 +80,7 @@ class BCConfig:
     def __post_init__(self):
         check_positive(self, "learning_rate", "num_envs", "batch_size", "updates_per_step", "unroll_length",
                        "buffer_size", "expert_action_eps", "standing_weight", "pull_away_weight",
-                       "standing_speed", "members")
+                       "braking_weight", "standing_speed", "members")
         if not 0.0 <= self.lr_end_fraction <= 1.0:
             raise ValueError(f"lr_end_fraction must be in [0, 1], got {self.lr_end_fraction}")
         if not 0.0 <= self.lr_decay_start < 1.0:

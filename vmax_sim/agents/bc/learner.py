@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import optax
 
 from vmax_sim.agents.bc.config import BCConfig
-from vmax_sim.agents.bc.losses import bc_loss, standing_weights
+from vmax_sim.agents.bc.losses import bc_loss, row_weights
 from vmax_sim.agents.bc.networks import make_networks
 from vmax_sim.agents.common import apply_gradients, ema_weight, global_norm, make_optimizer, polyak_update, scalar
 from vmax_sim.agents.networks import EncoderFactory
@@ -60,9 +60,10 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
 
     def loss_fn(params: Params, batch: Transition):
         weights = None
-        if config.standing_weight != 1.0 or config.pull_away_weight != 1.0:
-            weights = standing_weights(batch.obs.sdc, batch.expert_action, config.standing_speed,
-                                       config.standing_weight, config.pull_away_accel, config.pull_away_weight)
+        if config.standing_weight != 1.0 or config.pull_away_weight != 1.0 or config.braking_weight != 1.0:
+            weights = row_weights(batch.obs.sdc, batch.expert_action, config.standing_speed, config.standing_weight,
+                                  config.pull_away_accel, config.pull_away_weight, config.braking_accel,
+                                  config.braking_weight)
         return bc_loss(actor.apply(params, batch.obs), batch.expert_action, config.nll_weight, config.mse_weight,
                        config.expert_action_eps, weights)
 

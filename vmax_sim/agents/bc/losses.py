@@ -45,11 +45,15 @@ def bc_loss(dist: D.TanhGaussian, expert_action: jax.Array, nll_weight: float = 
     return loss, metrics
 
 
-def standing_weights(sdc_features: jax.Array, expert_action: jax.Array, standing_speed: float,
-                     standing_weight: float, pull_away_accel: float, pull_away_weight: float) -> jax.Array:
+def row_weights(sdc_features: jax.Array, expert_action: jax.Array, standing_speed: float, standing_weight: float,
+                pull_away_accel: float, pull_away_weight: float, braking_accel: float = -1.0,
+                braking_weight: float = 1.0) -> jax.Array:
     """Row weights (B,): where the SDC stands (its speed now below standing_speed, both in the observation's
     normalised units), pull_away_weight if the label's acceleration is above pull_away_accel (the teacher moves
-    off), else standing_weight; 1 where it moves. sdc_features (B, k, 6): the observation's SDC history, x, y, vx,
-    vy, cos, sin, last = now; expert_action (B, A), acceleration first."""
-    standing = jnp.where(expert_action[:, 0] > pull_away_accel, pull_away_weight, standing_weight)
-    return jnp.where(observed_sdc_speed(sdc_features) < standing_speed, standing, 1.0)
+    off), else standing_weight; where it moves, braking_weight if the label's acceleration is below braking_accel
+    (the teacher brakes), else 1. sdc_features (B, k, 6): the observation's SDC history, x, y, vx, vy, cos, sin,
+    last = now; expert_action (B, A), acceleration first."""
+    acceleration = expert_action[:, 0]
+    standing = jnp.where(acceleration > pull_away_accel, pull_away_weight, standing_weight)
+    moving = jnp.where(acceleration < braking_accel, braking_weight, 1.0)
+    return jnp.where(observed_sdc_speed(sdc_features) < standing_speed, standing, moving)
