@@ -67,6 +67,16 @@ class _SdcOnly:
     sdc: jax.Array  # (B, 1, 6) the SDC's features now
 
 
+def _fitted_mean_action(batch: Transition, **weights) -> float:
+    """The mean deterministic action of a 1-D BC policy fitted for 300 steps to `batch` with the row weights given."""
+    config = get_config("bc", "debug", learning_rate=1e-3, **weights)
+    learner = make_learner("bc", config, lambda: toy.ToyEncoder(8), 1)
+    state = learner.init(jax.random.key(0), batch.obs)
+    keys = jax.random.split(jax.random.key(1), 300)
+    state, _ = jax.lax.scan(lambda s, k: learner.update(s, batch, k), state, keys)
+    return float(jnp.mean(learner.act(learner.policy_params(state), batch.obs, jax.random.key(0), True)))
+
+
 def test_bc_pull_away_weight_pulls_the_fit_towards_the_standing_labels():
     # rows that look nearly alike, half standing (0.3 m/s) labelled +0.5 (moving off), half moving (0.9 m/s)
     # labelled -0.5: with the moving-off rows weighted 9 : 1 the policy's actions there lean to their label; weighting
@@ -78,18 +88,10 @@ def test_bc_pull_away_weight_pulls_the_fit_towards_the_standing_labels():
                             discount=jnp.ones(size), next_obs=_SdcOnly(sdc=sdc),
                             expert_action=jnp.where(moving, -0.5, 0.5)[:, None])
 
-    def fitted_mean_action(**weights):
-        config = get_config("bc", "debug", learning_rate=1e-3, **weights)
-        learner = make_learner("bc", config, lambda: toy.ToyEncoder(8), 1)
-        state = learner.init(jax.random.key(0), batch.obs)
-        keys = jax.random.split(jax.random.key(1), 300)
-        state, _ = jax.lax.scan(lambda s, k: learner.update(s, batch, k), state, keys)
-        return float(jnp.mean(learner.act(learner.policy_params(state), batch.obs, jax.random.key(0), True)))
-
-    plain = fitted_mean_action()
+    plain = _fitted_mean_action(batch)
     assert abs(plain) < 0.15
-    assert fitted_mean_action(pull_away_weight=9.0) > plain + 0.2
-    np.testing.assert_allclose(fitted_mean_action(standing_weight=9.0), plain, atol=1e-5)
+    assert _fitted_mean_action(batch, pull_away_weight=9.0) > plain + 0.2
+    np.testing.assert_allclose(_fitted_mean_action(batch, standing_weight=9.0), plain, atol=1e-5)
     with pytest.raises(ValueError, match="pull_away_weight"):
         get_config("bc", "debug", pull_away_weight=0.0)
 
@@ -104,17 +106,9 @@ def test_bc_braking_weight_pulls_the_fit_towards_the_braking_labels():
     batch = Transition.make(obs=_SdcOnly(sdc=sdc), action=jnp.zeros((size, 1)), reward=jnp.zeros(size),
                             discount=jnp.ones(size), next_obs=_SdcOnly(sdc=sdc), expert_action=labels)
 
-    def fitted_mean_action(**weights):
-        config = get_config("bc", "debug", learning_rate=1e-3, **weights)
-        learner = make_learner("bc", config, lambda: toy.ToyEncoder(8), 1)
-        state = learner.init(jax.random.key(0), batch.obs)
-        keys = jax.random.split(jax.random.key(1), 300)
-        state, _ = jax.lax.scan(lambda s, k: learner.update(s, batch, k), state, keys)
-        return float(jnp.mean(learner.act(learner.policy_params(state), batch.obs, jax.random.key(0), True)))
-
-    plain = fitted_mean_action()
+    plain = _fitted_mean_action(batch)
     assert plain > -0.1  # the unweighted fit sits near the rows' mean (0.0) or above it
-    assert fitted_mean_action(braking_weight=9.0) < plain - 0.2
+    assert _fitted_mean_action(batch, braking_weight=9.0) < plain - 0.2
     with pytest.raises(ValueError, match="braking_weight"):
         get_config("bc", "debug", braking_weight=-1.0)
 
@@ -209,19 +203,20 @@ def test_bc_members_learn_apart_and_act_as_one():
     assert any(bool(jnp.any(leaf[0] != leaf[1])) for leaf in leaves(state.policy_params))  # their own initialisations
     batch = toy.random_batch(jax.random.key(1), 2 * 32)  # one minibatch of 32 per member
     stepped, metrics = jax.jit(pair.update)(state, batch, jax.random.key(2))
-    for member in range(2):
-        def own(tree, m=member):
-            return jax.tree.map(lambda leaf: leaf[m], tree)
+    def own(tree, m):
+        return jax.tree.map(lambda leaf: leaf[m], tree)
 
-        alone_state = state.replace(policy_params=own(state.policy_params), opt_state=own(state.opt_state))
+    for member in range(2):
+        alone_state = state.replace(policy_params=own(state.policy_params, member),
+                                    opt_state=own(state.opt_state, member))
         rows = jax.tree.map(lambda leaf, m=member: leaf[32 * m:32 * (m + 1)], batch)
         alone, _ = jax.jit(single.update)(alone_state, rows, jax.random.key(2))
-        for got, want in zip(leaves(own(stepped.policy_params)), leaves(alone.policy_params)):
+        for got, want in zip(leaves(own(stepped.policy_params, member)), leaves(alone.policy_params)):
             np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7)
     assert metrics["bc_loss"].shape == ()
     held_out = toy.random_batch(jax.random.key(5), 8)
     key, params = jax.random.key(0), pair.policy_params(stepped)
-    each = [single.act(jax.tree.map(lambda leaf, m=m: leaf[m], params), held_out.obs, key, True) for m in range(2)]
+    each = [single.act(own(params, m), held_out.obs, key, True) for m in range(2)]
     np.testing.assert_allclose(pair.act(params, held_out.obs, key, True), np.mean(each, axis=0), rtol=1e-5,
                                atol=1e-7)
 
