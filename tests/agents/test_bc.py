@@ -232,6 +232,23 @@ def test_bc_members_learn_apart_and_act_as_one():
         get_config("bc", "debug", members=0)
 
 
+def test_cautious_bc_members_accelerate_with_the_smallest_and_steer_with_the_mean():
+    """`member_rule=cautious`: the members' actions combine as the mean with the smallest component 0 (acceleration)."""
+    obs_example = toy.observe(toy.reset(jax.random.key(0), 2))
+    single = make_learner("bc", get_config("bc", "debug"), lambda: toy.ToyEncoder(16), toy.ACTION_DIM)
+    pair = make_learner("bc", get_config("bc", "debug", members=2, member_rule="cautious"),
+                        lambda: toy.ToyEncoder(16), toy.ACTION_DIM)
+    params = pair.policy_params(pair.init(jax.random.key(0), obs_example))
+    obs, key = toy.random_batch(jax.random.key(5), 64).obs, jax.random.key(0)
+    each = np.stack([single.act(jax.tree.map(lambda leaf, m=m: leaf[m], params), obs, key, True) for m in range(2)])
+    assert np.min(np.abs(each[0, :, 0] - each[1, :, 0])) > 1e-4  # the smallest is not the mean anywhere
+    acted = pair.act(params, obs, key, True)
+    np.testing.assert_allclose(acted[:, 0], each[:, :, 0].min(axis=0), rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(acted[:, 1:], each[:, :, 1:].mean(axis=0), rtol=1e-5, atol=1e-7)
+    with pytest.raises(ValueError, match="member_rule"):
+        get_config("bc", "debug", member_rule="vote")
+
+
 def test_bc_sac_schedule():
     steps = jnp.arange(6)
     np.testing.assert_allclose(jax.vmap(lambda s: bc_weight_at(s, 2, 0.7))(steps), [0.7, 0, 0.7, 0, 0.7, 0],

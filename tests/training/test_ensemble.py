@@ -40,6 +40,31 @@ def test_the_ensemble_acts_with_the_mean_of_its_members_actions():
     assert ensemble.value is None
 
 
+def test_the_cautious_ensemble_steers_with_the_mean_and_accelerates_with_the_smallest():
+    """train.ensemble_rule=cautious: one member braking makes the ensemble brake, where the mean would still go."""
+    learner = _linear_learner()
+    # member 0 goes (+, +), member 1 brakes and steers the other way: columns (acceleration, curvature)
+    members = [{"w": jnp.array([[1.0, 0.5]])}, {"w": jnp.array([[-0.5, -0.5]])}]
+    observation = jnp.array([[1.0], [2.0]])  # (B=2, 1)
+    key = jax.random.PRNGKey(0)
+    actions = np.stack([learner.act(member, observation, key, True) for member in members])  # (M, B, A)
+    cautious = ensemble_learner(learner, "cautious").act(stack_params(members), observation, key, True)
+    np.testing.assert_allclose(cautious[:, 0], actions[1, :, 0], rtol=1e-6)  # member 1's brake
+    np.testing.assert_allclose(cautious[:, 1], actions[:, :, 1].mean(axis=0), rtol=1e-6)
+    assert float(np.mean(actions[:, :, 0], axis=0)[0]) > 0  # the mean would accelerate: not what drives
+    assert np.all(cautious[:, 0] < 0)
+
+
+def test_the_cautious_rule_needs_acceleration_actions_and_a_known_name(tmp_path):
+    assert tiny_config(tmp_path, "bc", "train.ensemble_rule=cautious").train.ensemble_rule == "cautious"
+    with pytest.raises(ValueError, match="ensemble_rule must be one of"):
+        tiny_config(tmp_path, "bc", "train.ensemble_rule=vote")
+    with pytest.raises(ValueError, match="env.dynamics=delta_local"):
+        tiny_config(tmp_path, "bc", "train.ensemble_rule=cautious", "env.dynamics=delta_local")
+    with pytest.raises(ValueError, match="env.dynamics=delta_local"):
+        tiny_config(tmp_path, "bc", "algo.member_rule=cautious", "env.dynamics=delta_local")
+
+
 @pytest.mark.slow  # ~70 s on 2 cores (a tiny BC run, its held-out evaluations and the ensemble's)
 def test_a_run_keeps_its_last_checkpoints_as_an_ensemble_that_evaluates_as_recorded(synthetic_shards, tmp_path):
     config = tiny_config(synthetic_shards, "bc", "train.total_env_steps=80", "train.chunk_steps=2",

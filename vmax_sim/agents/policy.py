@@ -44,17 +44,35 @@ def make_act_fns(dist_fn: Callable[[Params, object], D.TanhGaussian]):
     return act, act_with_info
 
 
-def mean_of_members(act: Callable) -> tuple[Callable, Callable]:
+# how several policies' actions become the one they drive with (`train.ensemble_rule`, bc's `algo.member_rule`)
+MEMBER_RULES = ("mean", "cautious")
+
+
+def combine_actions(actions: jax.Array, rule: str = "mean") -> jax.Array:
+    """The members' actions (M, B, A) as one (B, A). "mean": their mean. "cautious": their mean, but the smallest
+    acceleration (component 0 of the bicycle models' (acceleration, curvature) actions): where one member brakes
+    the group brakes, where the mean of a confident go and a brake would still go (docs/learning.md, session 52)."""
+    if rule not in MEMBER_RULES:
+        raise ValueError(f"member rule must be one of {', '.join(MEMBER_RULES)}, got {rule!r}")
+    mean = jnp.mean(actions, axis=0)
+    if rule == "mean":
+        return mean
+    return mean.at[..., 0].set(jnp.min(actions[..., 0], axis=0))
+
+
+def combine_members(act: Callable, rule: str = "mean") -> tuple[Callable, Callable]:
     """(act, act_with_info) of several policies driving as one: `act`'s parameters stacked on a leading member axis
-    (M, ...), the action the mean of the members' actions (B, A). A mean of members has no density: the info's
-    log_prob is 0."""
+    (M, ...), the action the members' actions (B, A) combined by `rule` (`combine_actions`). A combination of
+    members has no density: the info's log_prob is 0."""
+    if rule not in MEMBER_RULES:
+        raise ValueError(f"member rule must be one of {', '.join(MEMBER_RULES)}, got {rule!r}")
 
-    def mean_act(params: Params, obs, key: jax.Array, deterministic=False) -> jax.Array:
+    def combined_act(params: Params, obs, key: jax.Array, deterministic=False) -> jax.Array:
         actions = jax.vmap(lambda member: act(member, obs, key, deterministic))(params)  # (M, B, A)
-        return jnp.mean(actions, axis=0)
+        return combine_actions(actions, rule)
 
-    def mean_act_with_info(params: Params, obs, key: jax.Array, deterministic=False):
-        action = mean_act(params, obs, key, deterministic)
+    def combined_act_with_info(params: Params, obs, key: jax.Array, deterministic=False):
+        action = combined_act(params, obs, key, deterministic)
         return action, {"log_prob": jnp.zeros(action.shape[:1], action.dtype)}
 
-    return mean_act, mean_act_with_info
+    return combined_act, combined_act_with_info

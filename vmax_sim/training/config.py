@@ -22,7 +22,9 @@ from typing import Any
 
 from scenariomax import SyntheticKnobs
 from vmax_sim.agents import ALGORITHMS, get_config
+from vmax_sim.agents.policy import MEMBER_RULES
 from vmax_sim.data.config import HIDE_LIGHTS_FROM
+from vmax_sim.dynamics.model import BICYCLE_NAMES
 from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.selfplay import SelfPlayConfig
 from vmax_sim.networks import ENCODER_NAMES, EncoderConfig
@@ -92,6 +94,10 @@ class LoopConfig:
     # env steps between ensemble members; None: one with each checkpoint. Members hold no replay buffer, so they can
     # come far oftener than checkpoints: the ensemble then spans the run's last stretch, not its last N checkpoints
     ensemble_every: int | None = None
+    # how the ensemble's members drive as one (vmax_sim.agents.policy.combine_actions): "mean" (their mean action)
+    # or "cautious" (the mean steering with the smallest acceleration: where one member brakes, the ensemble
+    # brakes; bicycle dynamics)
+    ensemble_rule: str = "mean"
     save_buffer: bool = True  # the replay buffer travels in checkpoints (exact resume of off-policy runs)
     buffer_dtype: str = "float16"  # storage of floating-point observation leaves in the replay buffer
     # simulator steps each policy action is held for during training (one transition, rewards summed);
@@ -130,6 +136,9 @@ class LoopConfig:
                 raise ValueError(f"train.{name} must be at least 1, got {getattr(self, name)}")
         if self.ensemble < 0:
             raise ValueError(f"train.ensemble must be 0 (none) or more checkpoints, got {self.ensemble}")
+        if self.ensemble_rule not in MEMBER_RULES:
+            raise ValueError(f"train.ensemble_rule must be one of {', '.join(MEMBER_RULES)}, "
+                             f"got {self.ensemble_rule!r}")
         if self.pool_refresh is not None and (self.pool_refresh < 0 or self.pool_refresh > self.pool_size):
             raise ValueError(f"train.pool_refresh must be in [0, pool_size={self.pool_size}], got {self.pool_refresh}")
         if self.traffic not in TRAFFIC_CHOICES:
@@ -180,6 +189,10 @@ class TrainConfig:
         if self.is_selfplay and self.imitates and self.train.teacher == "log":
             raise ValueError("self-play has no log-following labels: algo.imitation_coef > 0 needs a rule teacher "
                              "(train.teacher=idm, pdm or pdm_state)")
+        if self.env.dynamics not in BICYCLE_NAMES and "cautious" in (
+                self.train.ensemble_rule, getattr(self.algo_config, "member_rule", "mean")):
+            raise ValueError(f"the cautious member rule takes the smallest acceleration of (acceleration, curvature) "
+                             f"actions; env.dynamics={self.env.dynamics} acts otherwise: choose bicycle dynamics")
         if self.env.max_num_objects != self.data.num_objects:
             object.__setattr__(self, "env", dataclasses.replace(self.env, max_num_objects=self.data.num_objects))
 

@@ -1,5 +1,6 @@
 """The policies of a run's last checkpoints (or of its last `train.ensemble_every` stretches) driving as one
-(`train.ensemble`): the mean of their actions.
+(`train.ensemble`): the mean of their actions, or with `train.ensemble_rule=cautious` the mean steering and the
+smallest acceleration.
 
 A student's score swings from one checkpoint to the next on scenes unlike its training scenes (docs/learning.md:
 real-scene accuracy 82.8-96.6% 100k env steps apart), and averaging the checkpoints' *weights* did not steady it.
@@ -17,7 +18,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
-from vmax_sim.agents.policy import mean_of_members
+from vmax_sim.agents.policy import combine_members
 from vmax_sim.agents.types import Learner
 from vmax_sim.training.checkpoint import CheckpointStore, write_policy_directory
 
@@ -35,10 +36,10 @@ def stack_params(members: list) -> object:
     return jax.tree.map(lambda *leaves: jnp.stack(leaves), *members)
 
 
-def ensemble_learner(learner: Learner) -> Learner:
-    """`learner` whose act takes stacked parameters (M, ...) and returns the mean of the M members' actions (B, A).
-    Only acting changes: the ensemble is a driver, not something to train."""
-    act, act_with_info = mean_of_members(learner.act)
+def ensemble_learner(learner: Learner, rule: str = "mean") -> Learner:
+    """`learner` whose act takes stacked parameters (M, ...) and returns the M members' actions combined by `rule`
+    (B, A; `train.ensemble_rule`). Only acting changes: the ensemble is a driver, not something to train."""
+    act, act_with_info = combine_members(learner.act, rule)
     return learner._replace(act=act, act_with_info=act_with_info, value=None)
 
 

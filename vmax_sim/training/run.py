@@ -812,7 +812,8 @@ class _Evaluator:
         from vmax_sim.evaluation.evaluate import evaluate
         from vmax_sim.evaluation.trained import trained_policy
 
-        policy = trained_policy(ensemble_learner(components(self.config)[1]), name=f"{self.policy.name}-ensemble")
+        learner = ensemble_learner(components(self.config)[1], self.config.train.ensemble_rule)
+        policy = trained_policy(learner, name=f"{self.policy.name}-ensemble")
         summary = evaluate(policy, self.data, data_config=self.data, env_config=self.env_config,
                            obs_config=self.config.obs, num_scenarios=self.config.train.eval_scenarios,
                            policy_params=params).summary

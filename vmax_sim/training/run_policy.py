@@ -50,7 +50,7 @@ class LoadedPolicy:
 
 def load_trained_policy(run_dir: str | Path, step: int | None = None) -> LoadedPolicy:
     """The policy of a training run directory at its latest (or the given) checkpoint; of an ensemble directory
-    (RUN/ensemble, `train.ensemble`), the mean action of all its members."""
+    (RUN/ensemble, `train.ensemble`), all its members driving as one (`train.ensemble_rule`)."""
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
     store = CheckpointStore(run_dir / "checkpoints")
@@ -64,7 +64,7 @@ def load_trained_policy(run_dir: str | Path, step: int | None = None) -> LoadedP
     try:
         if ensemble:
             params, steps = member_params(store, like, learner.policy_params)
-            learner, step = ensemble_learner(learner), steps[-1]
+            learner, step = ensemble_learner(learner, config.train.ensemble_rule), steps[-1]
         else:
             params = learner.policy_params(store.restore_learner(step, like))
     except (ValueError, KeyError) as error:

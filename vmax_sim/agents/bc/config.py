@@ -13,6 +13,7 @@ import dataclasses
 from typing import Any
 
 from vmax_sim.agents.common import check_positive, preset
+from vmax_sim.agents.policy import MEMBER_RULES
 
 STUDENT_MIXES = ("episode", "step")
 
@@ -54,6 +55,9 @@ class BCConfig:
     # A run's checkpoints 100k env steps apart fail different real scenes (docs/learning.md), but they share their
     # weights' history; members that share only the data err more independently of each other
     members: int = 1
+    # how the members' actions combine (vmax_sim.agents.policy.combine_actions): "mean", or "cautious" (the mean
+    # steering with the smallest acceleration; bicycle dynamics)
+    member_rule: str = "mean"
     # network
     policy_hidden_sizes: tuple[int, ...] = (256, 64, 32)
     activation: str = "relu"
@@ -91,6 +95,8 @@ class BCConfig:
             raise ValueError(f"student_drive must be in [0, 1], got {self.student_drive}")
         if self.student_mix not in STUDENT_MIXES:
             raise ValueError(f"student_mix must be one of {', '.join(STUDENT_MIXES)}, got {self.student_mix!r}")
+        if self.member_rule not in MEMBER_RULES:
+            raise ValueError(f"member_rule must be one of {', '.join(MEMBER_RULES)}, got {self.member_rule!r}")
         if self.nll_weight < 0 or self.mse_weight < 0 or self.nll_weight + self.mse_weight == 0:
             raise ValueError("nll_weight and mse_weight must be >= 0 and not both 0")
 

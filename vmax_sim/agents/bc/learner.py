@@ -19,7 +19,7 @@ from vmax_sim.agents.bc.losses import bc_loss, row_weights
 from vmax_sim.agents.bc.networks import make_networks
 from vmax_sim.agents.common import apply_gradients, ema_weight, global_norm, make_optimizer, polyak_update, scalar
 from vmax_sim.agents.networks import EncoderFactory
-from vmax_sim.agents.policy import make_act_fns, mean_of_members
+from vmax_sim.agents.policy import combine_members, make_act_fns
 from vmax_sim.agents.types import Learner, Metrics, Params, Transition
 
 
@@ -92,6 +92,6 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
 
     act, act_with_info = make_act_fns(actor.apply)
     if members > 1:
-        act, act_with_info = mean_of_members(act)
+        act, act_with_info = combine_members(act, config.member_rule)
     return Learner(init=init, update=update, act=act, policy_params=acting_params, act_with_info=act_with_info,
                    value=None)
