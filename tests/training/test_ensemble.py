@@ -55,6 +55,19 @@ def test_the_cautious_ensemble_steers_with_the_mean_and_accelerates_with_the_sma
     assert np.all(cautious[:, 0] < 0)
 
 
+def test_the_median_ensemble_is_not_moved_by_one_member_far_from_the_others():
+    """train.ensemble_rule=median: two members agree, the third is far off; the median drives as the two do."""
+    learner = _linear_learner()
+    members = [{"w": jnp.array([[0.2, 0.1]])}, {"w": jnp.array([[0.3, 0.0]])}, {"w": jnp.array([[-3.0, 2.0]])}]
+    observation = jnp.array([[1.0], [0.5]])  # (B=2, 1)
+    key = jax.random.PRNGKey(0)
+    actions = np.stack([learner.act(member, observation, key, True) for member in members])  # (M, B, A)
+    median = ensemble_learner(learner, "median").act(stack_params(members), observation, key, True)
+    np.testing.assert_allclose(median, np.median(actions, axis=0), rtol=1e-6)
+    assert np.all(median[:, 0] > 0) and np.all(median[:, 1] < 0.2)  # the two agreeing members' range
+    assert np.all(np.mean(actions, axis=0)[:, 0] < 0)  # where the mean follows the outlier into a brake
+
+
 def test_the_cautious_rule_needs_acceleration_actions_and_a_known_name(tmp_path):
     assert tiny_config(tmp_path, "bc", "train.ensemble_rule=cautious").train.ensemble_rule == "cautious"
     with pytest.raises(ValueError, match="ensemble_rule must be one of"):

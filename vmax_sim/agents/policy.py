@@ -45,15 +45,19 @@ def make_act_fns(dist_fn: Callable[[Params, object], D.TanhGaussian]):
 
 
 # how several policies' actions become the one they drive with (`train.ensemble_rule`, bc's `algo.member_rule`)
-MEMBER_RULES = ("mean", "cautious")
+MEMBER_RULES = ("mean", "median", "cautious")
 
 
 def combine_actions(actions: jax.Array, rule: str = "mean") -> jax.Array:
-    """The members' actions (M, B, A) as one (B, A). "mean": their mean. "cautious": their mean, but the smallest
-    acceleration (component 0 of the bicycle models' (acceleration, curvature) actions): where one member brakes
-    the group brakes, where the mean of a confident go and a brake would still go (docs/learning.md, session 52)."""
+    """The members' actions (M, B, A) as one (B, A). "mean": their mean. "median": each component's median, which
+    one member far from the others (a confident go among brakes, or a stall among goes) does not move.
+    "cautious": their mean, but the smallest acceleration (component 0 of the bicycle models' (acceleration,
+    curvature) actions): where one member brakes the group brakes, where the mean of a confident go and a brake
+    would still go (docs/learning.md, session 52)."""
     if rule not in MEMBER_RULES:
         raise ValueError(f"member rule must be one of {', '.join(MEMBER_RULES)}, got {rule!r}")
+    if rule == "median":
+        return jnp.median(actions, axis=0)
     mean = jnp.mean(actions, axis=0)
     if rule == "mean":
         return mean
