@@ -95,8 +95,8 @@ class LoopConfig:
     # come far oftener than checkpoints: the ensemble then spans the run's last stretch, not its last N checkpoints
     ensemble_every: int | None = None
     # how the ensemble's members drive as one (vmax_sim.agents.policy.combine_actions): "mean" (their mean action),
-    # "median" (each component's median: one member far from the others does not move it) or "cautious" (the mean steering with the smallest acceleration: where one member brakes, the ensemble
-    # brakes; bicycle dynamics)
+    # "median" (each component's median: one member far from the others does not move it) or "cautious" (the mean
+    # steering with the smallest acceleration: where one member brakes, the ensemble brakes; bicycle dynamics)
     ensemble_rule: str = "mean"
     save_buffer: bool = True  # the replay buffer travels in checkpoints (exact resume of off-policy runs)
     buffer_dtype: str = "float16"  # storage of floating-point observation leaves in the replay buffer

@@ -55,8 +55,8 @@ class BCConfig:
     # A run's checkpoints 100k env steps apart fail different real scenes (docs/learning.md), but they share their
     # weights' history; members that share only the data err more independently of each other
     members: int = 1
-    # how the members' actions combine (vmax_sim.agents.policy.combine_actions): "mean", "median", or "cautious" (the mean
-    # steering with the smallest acceleration; bicycle dynamics)
+    # how the members' actions combine (vmax_sim.agents.policy.combine_actions): "mean", "median", or "cautious"
+    # (the mean steering with the smallest acceleration; bicycle dynamics)
     member_rule: str = "mean"
     # network
     policy_hidden_sizes: tuple[int, ...] = (256, 64, 32)
