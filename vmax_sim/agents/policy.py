@@ -48,14 +48,18 @@ def make_act_fns(dist_fn: Callable[[Params, object], D.TanhGaussian]):
 MEMBER_RULES = ("mean", "median", "cautious")
 
 
+def check_member_rule(rule: str) -> None:
+    if rule not in MEMBER_RULES:
+        raise ValueError(f"member rule must be one of {', '.join(MEMBER_RULES)}, got {rule!r}")
+
+
 def combine_actions(actions: jax.Array, rule: str = "mean") -> jax.Array:
     """The members' actions (M, B, A) as one (B, A). "mean": their mean. "median": each component's median, which
     one member far from the others (a confident go among brakes, or a stall among goes) does not move.
     "cautious": their mean, but the smallest acceleration (component 0 of the bicycle models' (acceleration,
     curvature) actions): where one member brakes the group brakes, where the mean of a confident go and a brake
     would still go (docs/learning.md, session 52)."""
-    if rule not in MEMBER_RULES:
-        raise ValueError(f"member rule must be one of {', '.join(MEMBER_RULES)}, got {rule!r}")
+    check_member_rule(rule)
     if rule == "median":
         return jnp.median(actions, axis=0)
     mean = jnp.mean(actions, axis=0)
@@ -68,8 +72,7 @@ def combine_members(act: Callable, rule: str = "mean") -> tuple[Callable, Callab
     """(act, act_with_info) of several policies driving as one: `act`'s parameters stacked on a leading member axis
     (M, ...), the action the members' actions (B, A) combined by `rule` (`combine_actions`). A combination of
     members has no density: the info's log_prob is 0."""
-    if rule not in MEMBER_RULES:
-        raise ValueError(f"member rule must be one of {', '.join(MEMBER_RULES)}, got {rule!r}")
+    check_member_rule(rule)
 
     def combined_act(params: Params, obs, key: jax.Array, deterministic=False) -> jax.Array:
         actions = jax.vmap(lambda member: act(member, obs, key, deterministic))(params)  # (M, B, A)

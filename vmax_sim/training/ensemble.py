@@ -1,6 +1,6 @@
 """The policies of a run's last checkpoints (or of its last `train.ensemble_every` stretches) driving as one
-(`train.ensemble`): the mean of their actions, or with `train.ensemble_rule=cautious` the mean steering and the
-smallest acceleration.
+(`train.ensemble`): the mean of their actions, or by `train.ensemble_rule` their median or their mean steering with
+the smallest acceleration.
 
 A student's score swings from one checkpoint to the next on scenes unlike its training scenes (docs/learning.md:
 real-scene accuracy 82.8-96.6% 100k env steps apart), and averaging the checkpoints' *weights* did not steady it.
