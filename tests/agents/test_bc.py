@@ -189,6 +189,11 @@ def test_bc_learning_rate_share_scales_each_step():
         get_config("bc", "debug", lr_decay_start=1.0)
 
 
+def _member(tree, m: int):
+    """Member `m` of a pytree whose leaves carry a leading member axis (M, ...)."""
+    return jax.tree.map(lambda leaf: leaf[m], tree)
+
+
 def test_bc_members_learn_apart_and_act_as_one():
     """`members` M: M students from their own initialisations, each stepping on its own minibatch of the batch (its
     step the one a single student takes on that minibatch), acting with the mean of their actions."""
@@ -203,20 +208,17 @@ def test_bc_members_learn_apart_and_act_as_one():
     assert any(bool(jnp.any(leaf[0] != leaf[1])) for leaf in leaves(state.policy_params))  # their own initialisations
     batch = toy.random_batch(jax.random.key(1), 2 * 32)  # one minibatch of 32 per member
     stepped, metrics = jax.jit(pair.update)(state, batch, jax.random.key(2))
-    def own(tree, m):
-        return jax.tree.map(lambda leaf: leaf[m], tree)
-
     for member in range(2):
-        alone_state = state.replace(policy_params=own(state.policy_params, member),
-                                    opt_state=own(state.opt_state, member))
+        alone_state = state.replace(policy_params=_member(state.policy_params, member),
+                                    opt_state=_member(state.opt_state, member))
         rows = jax.tree.map(lambda leaf, m=member: leaf[32 * m:32 * (m + 1)], batch)
         alone, _ = jax.jit(single.update)(alone_state, rows, jax.random.key(2))
-        for got, want in zip(leaves(own(stepped.policy_params, member)), leaves(alone.policy_params)):
+        for got, want in zip(leaves(_member(stepped.policy_params, member)), leaves(alone.policy_params)):
             np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7)
     assert metrics["bc_loss"].shape == ()
     held_out = toy.random_batch(jax.random.key(5), 8)
     key, params = jax.random.key(0), pair.policy_params(stepped)
-    each = [single.act(own(params, m), held_out.obs, key, True) for m in range(2)]
+    each = [single.act(_member(params, m), held_out.obs, key, True) for m in range(2)]
     np.testing.assert_allclose(pair.act(params, held_out.obs, key, True), np.mean(each, axis=0), rtol=1e-5,
                                atol=1e-7)
 
@@ -240,7 +242,7 @@ def test_cautious_bc_members_accelerate_with_the_smallest_and_steer_with_the_mea
                         lambda: toy.ToyEncoder(16), toy.ACTION_DIM)
     params = pair.policy_params(pair.init(jax.random.key(0), obs_example))
     obs, key = toy.random_batch(jax.random.key(5), 64).obs, jax.random.key(0)
-    each = np.stack([single.act(jax.tree.map(lambda leaf, m=m: leaf[m], params), obs, key, True) for m in range(2)])
+    each = np.stack([single.act(_member(params, m), obs, key, True) for m in range(2)])
     assert np.min(np.abs(each[0, :, 0] - each[1, :, 0])) > 1e-4  # the smallest is not the mean anywhere
     acted = pair.act(params, obs, key, True)
     np.testing.assert_allclose(acted[:, 0], each[:, :, 0].min(axis=0), rtol=1e-5, atol=1e-7)

@@ -48,9 +48,10 @@ def make_act_fns(dist_fn: Callable[[Params, object], D.TanhGaussian]):
 MEMBER_RULES = ("mean", "median", "cautious")
 
 
-def check_member_rule(rule: str) -> None:
+def check_member_rule(rule: str, setting: str = "member rule") -> None:
+    """Refuses a `rule` not in MEMBER_RULES, naming the `setting` it came from."""
     if rule not in MEMBER_RULES:
-        raise ValueError(f"member rule must be one of {', '.join(MEMBER_RULES)}, got {rule!r}")
+        raise ValueError(f"{setting} must be one of {', '.join(MEMBER_RULES)}, got {rule!r}")
 
 
 def combine_actions(actions: jax.Array, rule: str = "mean") -> jax.Array:

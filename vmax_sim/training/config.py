@@ -22,7 +22,7 @@ from typing import Any
 
 from scenariomax import SyntheticKnobs
 from vmax_sim.agents import ALGORITHMS, get_config
-from vmax_sim.agents.policy import MEMBER_RULES
+from vmax_sim.agents.policy import check_member_rule
 from vmax_sim.data.config import HIDE_LIGHTS_FROM
 from vmax_sim.dynamics.model import BICYCLE_NAMES
 from vmax_sim.env.config import EnvConfig
@@ -136,9 +136,7 @@ class LoopConfig:
                 raise ValueError(f"train.{name} must be at least 1, got {getattr(self, name)}")
         if self.ensemble < 0:
             raise ValueError(f"train.ensemble must be 0 (none) or more checkpoints, got {self.ensemble}")
-        if self.ensemble_rule not in MEMBER_RULES:
-            raise ValueError(f"train.ensemble_rule must be one of {', '.join(MEMBER_RULES)}, "
-                             f"got {self.ensemble_rule!r}")
+        check_member_rule(self.ensemble_rule, "train.ensemble_rule")
         if self.pool_refresh is not None and (self.pool_refresh < 0 or self.pool_refresh > self.pool_size):
             raise ValueError(f"train.pool_refresh must be in [0, pool_size={self.pool_size}], got {self.pool_refresh}")
         if self.traffic not in TRAFFIC_CHOICES:

@@ -13,7 +13,7 @@ import dataclasses
 from typing import Any
 
 from vmax_sim.agents.common import check_positive, preset
-from vmax_sim.agents.policy import MEMBER_RULES
+from vmax_sim.agents.policy import check_member_rule
 
 STUDENT_MIXES = ("episode", "step")
 
@@ -95,8 +95,7 @@ class BCConfig:
             raise ValueError(f"student_drive must be in [0, 1], got {self.student_drive}")
         if self.student_mix not in STUDENT_MIXES:
             raise ValueError(f"student_mix must be one of {', '.join(STUDENT_MIXES)}, got {self.student_mix!r}")
-        if self.member_rule not in MEMBER_RULES:
-            raise ValueError(f"member_rule must be one of {', '.join(MEMBER_RULES)}, got {self.member_rule!r}")
+        check_member_rule(self.member_rule, "member_rule")
         if self.nll_weight < 0 or self.mse_weight < 0 or self.nll_weight + self.mse_weight == 0:
             raise ValueError("nll_weight and mse_weight must be >= 0 and not both 0")
 
