@@ -104,6 +104,27 @@ def _varints(v: np.ndarray) -> bytes:
     return out.tobytes()
 
 
+_VARINT_SHIFTS = np.arange(0, 70, 7, dtype=np.uint64)  # (10,) the 7-bit group of each varint byte
+
+
+def _varint_rows(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each value's varint bytes, padded: (n, width) uint8 and the bytes each uses (n,). v (n,) uint64"""
+    length = np.searchsorted(_VARINT_STEPS, v, side="right") + 1  # (n,) 1..10
+    width = int(length.max())
+    rows = ((v[:, None] >> _VARINT_SHIFTS[:width]) & np.uint64(0x7F)).astype(np.uint8)  # (n, width) 7-bit groups
+    rows[np.arange(width) < (length - 1)[:, None]] |= 0x80  # continuation bit on every byte of a value but its last
+    return rows, length
+
+
+def _varint_runs(v: np.ndarray, starts: np.ndarray) -> bytes:
+    """Packed varints of uint64 values made of runs of equal values (first index of each run: `starts` (r,)):
+    each run's value encoded once, its bytes repeated. (n,) -> bytes"""
+    rows, length = _varint_rows(v[starts])  # (r, width), (r,)
+    counts = np.diff(np.append(starts, len(v)))  # (r,)
+    rows, length = np.repeat(rows, counts, axis=0), np.repeat(length, counts)  # (n, width), (n,)
+    return rows[np.arange(rows.shape[1]) < length[:, None]].tobytes()  # row order: the values in order
+
+
 def varints(values: np.ndarray) -> bytes:
     """Packed protobuf varints of int64 values, as protobuf writes them (a negative value as its 64-bit two's
     complement: 10 bytes). (n,) -> bytes"""
@@ -113,7 +134,16 @@ def varints(values: np.ndarray) -> bytes:
     # Shard arrays end in padding (-1: 10 bytes each): the trailing run of one value is one varint repeated.
     differs = np.flatnonzero(v != v[-1])  # (k,)
     head = int(differs[-1]) + 1 if differs.size else 0
-    return _varints(v[:head]) + _varints(v[-1:]) * (len(v) - head)
+    tail = _varints(v[-1:]) * (len(v) - head)
+    v = v[:head]
+    if head == 0 or v.max() < 0x80:  # masks, types, small ids: one byte each
+        return v.astype(np.uint8).tobytes() + tail
+    # Roadgraph ids, lane links, timestamps repeat in runs (points of one polyline, padding -1 of a row): each run
+    # encoded once. Without runs the values are encoded by byte length (fewer bytes to shift than padded rows).
+    starts = np.flatnonzero(np.concatenate([[True], v[1:] != v[:-1]]))  # (r,)
+    if 2 * len(starts) <= head:
+        return _varint_runs(v, starts) + tail
+    return _varints(v) + tail
 
 
 def _feature_chunks(value: FeatureValue) -> list[bytes]:

@@ -68,6 +68,18 @@ def test_varints_match_protobuf():
     assert varints(np.full(5, -1)) == bytes.fromhex("ffffffffffffffffff01") * 5
 
 
+def test_varints_of_runs_match_protobuf():
+    # Runs of equal values (roadgraph ids, padding inside rows) are encoded once per run: the bytes must not change.
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        values = rng.integers(-2 ** 63, 2 ** 63 - 1, 30, dtype=np.int64) >> rng.integers(0, 64, 30)
+        values[rng.random(30) < 0.3] = -1
+        values = np.repeat(values, rng.integers(1, 12, 30))
+        example = Example()
+        example.features.feature["v"].int64_list.value.extend(values.tolist())
+        assert varints(values) in example.SerializeToString()
+
+
 def test_unsupported_dtype_is_named():
     with pytest.raises(TypeError, match="feature 'o'"):
         encode_example({"o": np.array(["a"], object)})
