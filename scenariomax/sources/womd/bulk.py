@@ -109,3 +109,88 @@ def point_table(points: list[bytes]) -> np.ndarray:
     if len(rest):
         table[rest] = _parse_each(proto.MapPointProto, points, rest, _POINT_GETTER)
     return table
+
+
+# --- map points a polyline at a time ---------------------------------------------------------------
+# A serialised MapFeature as Waymo writes it: id, then the one geometry message, whose points are consecutive
+# fields of 29 bytes (tag, length 27, a full MapPoint). Each such run is decoded in one numpy pass per map.
+_RUN_RECORD = np.dtype([("tag", "u1"), ("length", "u1"),
+                        *((name, _POINT_FULL[0][name]) for name in _POINT_FULL[0].names)])  # 29 bytes
+# MapFeature tag of each geometry message -> (tag of its point field, header tags allowed before the points:
+# fixed64 (8 bytes) or varint). Lane: speed_limit_mph, type, interpolating; road line / edge: type.
+_GEOMETRY = {0x1A: (0x42, {0x09: 8, 0x10: 0, 0x18: 0}), 0x22: (0x12, {0x08: 0}), 0x2A: (0x12, {0x08: 0}),
+             0x42: (0x0A, {}), 0x4A: (0x0A, {}), 0x52: (0x0A, {})}
+
+
+def _skip_varint(data: bytes, pos: int) -> int:
+    """Position after the varint at `pos` (IndexError past the end)."""
+    while data[pos] & 0x80:
+        pos += 1
+    return pos + 1
+
+
+def _read_varint(data: bytes, pos: int) -> tuple[int, int]:
+    value, shift = 0, 0
+    while True:
+        byte = data[pos]
+        value |= (byte & 0x7F) << shift
+        pos, shift = pos + 1, shift + 7
+        if byte < 0x80:
+            return value, pos
+
+
+def _run_start(feature: bytes, count: int) -> tuple[int, int] | None:
+    """(point field tag, position of the first point field) of a serialised MapFeature laid out as Waymo writes it,
+    with room for `count` points of 29 bytes from there to the end of its geometry message; None for any other
+    layout. Walks the fields one by one up to the points, so the position is a field boundary."""
+    try:
+        pos = _skip_varint(feature, 1) if feature[0] == 0x08 else 0  # the id
+        geometry = _GEOMETRY.get(feature[pos])
+        if geometry is None:
+            return None
+        length, pos = _read_varint(feature, pos + 1)
+        end = pos + length
+        if end != len(feature):  # the geometry message is the feature's last and only other field
+            return None
+        point_tag, header = geometry
+        while pos < end and feature[pos] != point_tag:
+            size = header.get(feature[pos])
+            if size is None:
+                return None
+            pos = pos + 1 + size if size else _skip_varint(feature, pos + 1)
+    except IndexError:
+        return None
+    return (point_tag, pos) if pos + 29 * count <= end else None
+
+
+def feature_points(features: list[bytes], counts: list[int]) -> list[np.ndarray | None]:
+    """The points of serialised MapFeatures whose geometry has `counts[i]` points (the count the parsed message
+    gives): (n_i, 3) float64 where the points are one run of full MapPoint fields (`_run_start`), else None (the
+    caller parses those). The run holds all n_i point fields of the message, in order: it starts at a field
+    boundary and its n_i fields are all of that number, which the message has n_i of."""
+    out: list[np.ndarray | None] = [None] * len(features)
+    found = []  # (feature, point tag, start)
+    for row, (feature, count) in enumerate(zip(features, counts)):
+        if count == 0:
+            out[row] = np.zeros((0, 3))
+            continue
+        start = _run_start(feature, count)
+        if start is not None:
+            found.append((row, *start))
+    if not found:
+        return out
+    runs = [features[row][start:start + 29 * counts[row]] for row, _, start in found]
+    records = np.frombuffer(b"".join(runs), _RUN_RECORD)  # (n,)
+    num = np.array([counts[row] for row, _, _ in found], np.int64)  # (r,)
+    tags = np.repeat(np.array([tag for _, tag, _ in found], np.uint8), num)  # (n,)
+    ok = (records["tag"] == tags) & (records["length"] == 27)
+    for tag, value in _POINT_FULL[1].items():
+        ok &= records[tag] == value
+    good = np.logical_and.reduceat(ok, np.concatenate([[0], np.cumsum(num)[:-1]]))  # (r,) every point of the run
+    table = np.empty((len(records), 3))
+    table[:, 0], table[:, 1], table[:, 2] = records["x"], records["y"], records["z"]
+    ends = np.cumsum(num).tolist()
+    for (row, _, _), stop, count, fine in zip(found, ends, num.tolist(), good.tolist()):
+        if fine:
+            out[row] = table[stop - count:stop]
+    return out

@@ -68,6 +68,14 @@ def parse_scenario(data: bytes, bulk: bool = False) -> proto.ScenarioProto:
     return message
 
 
+def parse_map_features(data: bytes) -> list[bytes] | None:
+    """The serialised map features of a Scenario message (for `map_polylines`), or None when it does not parse."""
+    try:
+        return list(proto.ScenarioMapFeaturesProto.FromString(data).map_features)
+    except (DecodeError, RuntimeError, ValueError):
+        return None
+
+
 # --- tracks --------------------------------------------------------------------------------------
 def track_arrays(message) -> dict[str, np.ndarray]:
     """Per-track state arrays over the whole log: (N, T) float64 for each state field, (N, T) bool valid."""
@@ -93,27 +101,40 @@ def track_arrays(message) -> dict[str, np.ndarray]:
 
 
 # --- map -----------------------------------------------------------------------------------------
-def _point_arrays(containers: list, serialised: bool = False) -> list[np.ndarray]:
+def _point_arrays(containers: list, serialised: bool = False, features: list[bytes] | None = None) -> list[np.ndarray]:
     """The points of every map feature (MapPoint messages, or their bytes when `serialised`), converted in one
-    pass: (n_i, 3) float64 each."""
+    pass: (n_i, 3) float64 each. `features`: the serialised MapFeature of each container (bulk only), whose
+    points are decoded a whole polyline at a time where Waymo's layout allows (`bulk.feature_points`)."""
     counts = [len(points) for points in containers]
+    out: list = [None] * len(containers)
+    if serialised and features is not None:
+        out = bulk.feature_points(features, counts)
+    rest = [row for row, xyz in enumerate(out) if xyz is None]  # every container when not decoded by feature
+    if not rest:
+        return out
     if serialised:
         try:
-            table = bulk.point_table([point for points in containers for point in points])
+            table = bulk.point_table([point for row in rest for point in containers[row]])
         except ValueError as error:
             raise ScenarioBuildError(str(error)) from None
     else:
-        rows = [xyz for points in containers for xyz in map(_POINT_GETTER, points)]
+        rows = [xyz for row in rest for xyz in map(_POINT_GETTER, containers[row])]
         table = np.array(rows, np.float64).reshape(-1, 3)  # (sum n_i, 3)
-    return np.split(table, np.cumsum(counts)[:-1]) if containers else []
+    stops = np.cumsum([counts[row] for row in rest]).tolist()
+    for row, stop in zip(rest, stops):
+        out[row] = table[stop - counts[row]:stop]
+    return out
 
 
-def map_polylines(message, orient_edges: bool = True) -> tuple[list[MapPolyline], list[LaneLinks]]:
+def map_polylines(message, orient_edges: bool = True,
+                  raw_features: list[bytes] | None = None) -> tuple[list[MapPolyline], list[LaneLinks]]:
     """Map features -> polylines (road edges oriented, road on the left, unless `orient_edges` is False) and lane
-    links."""
+    links. `raw_features`: the message's map features serialised (`parse_map_features`), which lets a bulk
+    message's points be decoded a polyline at a time."""
     features: list[tuple] = []  # (id, roadgraph type, points container, speed limit, closed)
     links: list[LaneLinks] = []
-    for feature in message.map_features:
+    kept: list[int] = []  # index in map_features of each entry of `features`
+    for index, feature in enumerate(message.map_features):
         kind = feature.WhichOneof("feature_data")
         fid = int(feature.id)
         if kind == "lane":
@@ -136,7 +157,12 @@ def map_polylines(message, orient_edges: bool = True) -> tuple[list[MapPolyline]
             rg_type = {"crosswalk": sch.RG_CROSSWALK, "speed_bump": sch.RG_SPEED_BUMP,
                        "driveway": sch.RG_DRIVEWAY}[kind]
             features.append((fid, rg_type, getattr(feature, kind).polygon, -1.0, True))
-    points = _point_arrays([container for _, _, container, _, _ in features], proto.is_bulk(message))
+        if len(features) > len(kept):
+            kept.append(index)
+    serialised = proto.is_bulk(message)
+    raw = ([raw_features[index] for index in kept]
+           if serialised and raw_features is not None and len(raw_features) == len(message.map_features) else None)
+    points = _point_arrays([container for _, _, container, _, _ in features], serialised, raw)
     polylines = [MapPolyline(fid, rg_type, xyz, speed_limit=limit, closed=closed)
                  for (fid, rg_type, _, limit, closed), xyz in zip(features, points) if len(xyz)]
     return (orient_road_edges(polylines) if orient_edges else polylines), links
@@ -239,11 +265,13 @@ def _waymo_paths(message, sdc_paths: str, sizes: Sizes) -> dict | None:
 
 
 def scenario_windows(message, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE, sdc_paths: str = SDC_PATHS_AUTO,
-                     orient_edges: bool = True) -> Iterator[Scenario | ScenarioBuildError]:
+                     orient_edges: bool = True,
+                     raw_features: list[bytes] | None = None) -> Iterator[Scenario | ScenarioBuildError]:
     """Every 91-step window of one WOMD Scenario message, fitted to the budget. Windows that cannot be
     built are yielded as ScenarioBuildError (the caller records them as Failures). `sdc_paths` chooses
     who makes the SDC paths (see sdc_paths.py): Waymo's paths start at the log's own current step, so
-    they go to that window only; the others are left to the reconstruction. `orient_edges`: see `WomdSource`."""
+    they go to that window only; the others are left to the reconstruction. `orient_edges`: see `WomdSource`.
+    `raw_features`: see `map_polylines`."""
     scenario_id = message.scenario_id or "unnamed"
     num_steps = len(message.timestamps_seconds)
     current = message.current_time_index if message.HasField("current_time_index") else sizes.num_past
@@ -259,7 +287,7 @@ def scenario_windows(message, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE,
         return
     tracks = track_arrays(message)
     objects = _object_fields(message)
-    polylines, links = map_polylines(message, orient_edges)
+    polylines, links = map_polylines(message, orient_edges, raw_features)
     roadgraph = polylines_to_roadgraph(polylines)
     lane_graph = lane_graph_arrays(links, sizes.num_lane_links)
     seconds = np.asarray(message.timestamps_seconds, np.float64)

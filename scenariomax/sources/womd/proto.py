@@ -130,6 +130,22 @@ MapPointProto = _message_class("MapPoint")
 ScenarioBulkProto = _message_class("Scenario", _BULK_POOL, _BULK_PACKAGE)
 
 
+def _map_features_pool(package: str) -> descriptor_pool.DescriptorPool:
+    """A Scenario that declares only its map features, as their serialised bytes (the other fields are skipped)."""
+    file_proto = descriptor_pb2.FileDescriptorProto(name=f"{package.replace('.', '_')}_scenario.proto",
+                                                    package=package, syntax="proto2")
+    file_proto.message_type.add(name="Scenario").field.add(name="map_features", number=8, type=_F.TYPE_BYTES,
+                                                           label=_REPEATED)
+    pool = descriptor_pool.DescriptorPool()
+    pool.Add(file_proto)
+    return pool
+
+
+# The map features of a Scenario as bytes each: their points decoded a whole polyline at a time (bulk.py).
+_MAP_PACKAGE = "vmax.womd_map"
+ScenarioMapFeaturesProto = _message_class("Scenario", _map_features_pool(_MAP_PACKAGE), _MAP_PACKAGE)
+
+
 def is_bulk(message) -> bool:
     """Whether a Scenario message is the bulk variant (states and map points as bytes)."""
     return message.DESCRIPTOR.full_name.startswith(_BULK_PACKAGE + ".")

@@ -10,7 +10,13 @@ from scenariomax.errors import InputError
 from scenariomax.io.tfrecord import RecordError, iter_records
 from scenariomax.schema import Sizes
 from scenariomax.sources.base import Failure, UnitItem, expand_inputs
-from scenariomax.sources.womd.convert import SOURCE_NAME, ScenarioBuildError, parse_scenario, scenario_windows
+from scenariomax.sources.womd.convert import (
+    SOURCE_NAME,
+    ScenarioBuildError,
+    parse_map_features,
+    parse_scenario,
+    scenario_windows,
+)
 from scenariomax.sources.womd.sdc_paths import SDC_PATHS_AUTO, SDC_PATHS_MODES
 from scenariomax.sources.womd.tfexample import (
     FORMAT_AUTO,
@@ -97,7 +103,7 @@ class WomdSource:
             message = parse_scenario(record, bulk=True)
             ref = message.scenario_id or ref
             for item in scenario_windows(message, self.budget, self.window_stride, self.sdc_paths,
-                                         self.orient_edges):
+                                         self.orient_edges, parse_map_features(record)):
                 yield Failure(unit, ref, one_line(item)) if isinstance(item, Exception) else item
         except Exception as error:  # noqa: BLE001 - fault isolation: one bad scenario never stops the file
             yield Failure(unit, ref, one_line(error))

@@ -63,3 +63,82 @@ def test_light_arrays_keep_the_last_report_of_a_lane_in_a_step():
     np.testing.assert_array_equal(arrays["tl_valid"], [[True] * 3 + [False] * 2] * 2)
     np.testing.assert_array_equal(arrays["tl_lane_id"], [[2, 2, 2, -1, -1], [5, 5, 5, -1, -1]])
     np.testing.assert_array_equal(arrays["tl_x"][1], [5, 6, 7, -1, -1])
+
+
+def _bulk_class(name: str):
+    return proto._message_class(name, proto._BULK_POOL, proto._BULK_PACKAGE)
+
+
+def _map_features() -> tuple[list[bytes], list[bool]]:
+    """Serialised MapFeatures in Waymo's layout and in others, and whether each is Waymo's (decoded by run)."""
+    feature, lane, line, edge, polygon = (_bulk_class(name) for name in
+                                          ("MapFeature", "LaneCenter", "RoadLine", "RoadEdge", "Crosswalk"))
+    point = proto.MapPointProto
+    xyz = [point(x=1.5 + k, y=-2.0 * k, z=0.25 * k).SerializeToString() for k in range(4)]
+    out = [
+        (feature(id=1, lane=lane(speed_limit_mph=25.0, type=2, interpolating=True, polyline=xyz, entry_lanes=[3],
+                                 exit_lanes=[4, 5])).SerializeToString(), True),
+        (feature(id=2 ** 40, road_line=line(type=6, polyline=xyz[:3])).SerializeToString(), True),
+        (feature(id=3, road_edge=edge(polyline=xyz[1:])).SerializeToString(), True),  # no type field
+        (feature(crosswalk=polygon(polygon=xyz)).SerializeToString(), True),  # no id
+        (feature(id=4, lane=lane(type=1)).SerializeToString(), True),  # no points
+        # Not Waymo's layout: each must fall back to the regular parse.
+        (feature(id=5, lane=lane(polyline=[point(x=1.0, y=2.0).SerializeToString()] * 2)).SerializeToString(),
+         False),  # z unset: 18-byte points
+        (feature(id=6, road_line=line(polyline=[xyz[0], point(x=7.0).SerializeToString() + xyz[1]])
+                 ).SerializeToString(), False),  # a field twice: 36 bytes, the last value wins
+        (feature(id=7, road_edge=edge(polyline=[point(y=2.0).SerializeToString() + point(x=1.0, z=3.0)
+                                                .SerializeToString()])).SerializeToString(), False),  # y before x
+        (feature(road_line=line(polyline=xyz[:2])).SerializeToString() + feature(id=8).SerializeToString(),
+         False),  # id after the geometry
+        (feature(id=9, road_edge=edge(type=1, polyline=xyz[:2])).SerializeToString()
+         + feature(road_edge=edge(polyline=xyz[2:])).SerializeToString(), False),  # geometry in two parts
+        (feature(id=10).SerializeToString()  # a header field between the points
+         + _field_bytes(3, lane(polyline=xyz[:2]).SerializeToString() + lane(type=1).SerializeToString()
+                        + lane(polyline=xyz[2:]).SerializeToString()), False),
+        (feature(id=11, lane=lane(speed_limit_mph=30.0, polyline=xyz)).SerializeToString()
+         + _field_bytes(99, b"x"), False),  # an unknown field after the geometry
+        (feature(id=12, stop_sign=_bulk_class("StopSign")(lane=[1], position=xyz[0])).SerializeToString(), False),
+    ]
+    return [data for data, _ in out], [waymo for _, waymo in out]
+
+
+def _field_bytes(number: int, payload: bytes) -> bytes:
+    """A length-delimited field (number < 2048, payload < 16384 bytes)."""
+    tag = (number << 3) | 2
+    head = bytes([tag]) if tag < 0x80 else bytes([(tag & 0x7F) | 0x80, tag >> 7])
+    size = len(payload)
+    return head + (bytes([size]) if size < 0x80 else bytes([(size & 0x7F) | 0x80, size >> 7])) + payload
+
+
+def test_map_points_decoded_by_run_are_the_regular_parse():
+    from scenariomax.sources.womd.convert import map_polylines, parse_map_features, parse_scenario
+
+    features, waymo = _map_features()
+    data = proto.ScenarioMapFeaturesProto(map_features=features).SerializeToString()
+    raw = parse_map_features(data)
+    assert raw == features
+    regular, links = map_polylines(parse_scenario(data), orient_edges=False)
+    fast, fast_links = map_polylines(parse_scenario(data, bulk=True), orient_edges=False, raw_features=raw)
+    assert [line.feature_id for line in fast] == [line.feature_id for line in regular]
+    assert len(regular) == len(features) - 1  # every feature but the lane without points
+    for want, got in zip(regular, fast):
+        np.testing.assert_array_equal(got.xyz, want.xyz)
+        assert got.xyz.dtype == want.xyz.dtype and got.xyz.shape == want.xyz.shape
+    assert [vars(link) for link in fast_links] == [vars(link) for link in links]
+    # The run decoder took exactly Waymo's layouts (the others went to the regular parse).
+    message = parse_scenario(data, bulk=True)
+    counts = []
+    for feature in message.map_features:
+        kind = feature.WhichOneof("feature_data")
+        geometry = getattr(feature, kind)
+        counts.append(1 if kind == "stop_sign" else len(geometry.polygon if kind == "crosswalk" else geometry.polyline))
+    decoded = bulk.feature_points(raw, counts)
+    assert [xyz is not None for xyz in decoded] == waymo
+
+
+def test_map_points_of_cut_features_fall_back():
+    features, _ = _map_features()
+    for data in features[:4]:
+        for cut in (1, 2, 5, len(data) - 1):
+            assert bulk.feature_points([data[:cut]], [4])[0] is None
