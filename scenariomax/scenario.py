@@ -247,12 +247,11 @@ def validate_scenario(s: Scenario) -> list[str]:
         problems.append("object ids must be below 2^24 (state/id is stored as float32)")
     if np.any(s.world_origin != np.round(s.world_origin)) or np.any(np.abs(s.world_origin) >= MAX_EXACT_OBJECT_ID):
         problems.append("world_origin must be whole metres below 2^24 (stored exactly as float32)")
-    stamps = np.where(valid, s.timestamp_micros, np.iinfo(np.int64).min)
-    for row, row_valid in zip(stamps, valid):
-        seen = row[row_valid]
-        if seen.size > 1 and np.any(np.diff(seen) <= 0):
-            problems.append("timestamps do not increase along a trajectory")
-            break
+    # The valid stamps of all rows back to back: each must exceed the one before it in the same row.
+    row_of, _ = np.nonzero(valid)  # (v,) row-major, as s.timestamp_micros[valid]
+    step = np.diff(s.timestamp_micros[valid])  # (v-1,)
+    if np.any((step <= 0) & (row_of[1:] == row_of[:-1])):
+        problems.append("timestamps do not increase along a trajectory")
     problems += _validate_roadgraph(s)
     problems += _validate_lights(s, t)
     problems += _validate_paths(s)
@@ -276,7 +275,8 @@ def _validate_roadgraph(s: Scenario) -> list[str]:
     if norms.size and np.any((norms > 1.01) | ((norms < 0.99) & (norms > 1e-3))):
         problems.append("roadgraph_dir has vectors that are neither unit nor zero")
     known = set(sch.load_schema().enums["roadgraph_type"])
-    bad = set(np.unique(s.roadgraph_type[valid]).tolist()) - known
+    types = s.roadgraph_type[valid]  # (v,) in runs of one polyline: its distinct values are those of the run starts
+    bad = set(np.unique(types[np.concatenate([[True], types[1:] != types[:-1]])]).tolist()) - known
     if bad:
         problems.append(f"unknown roadgraph types {sorted(bad)}")
     return problems

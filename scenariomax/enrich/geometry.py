@@ -134,26 +134,38 @@ def _nearest_pruned(pts, line, ax, ay, sx, sy, seg_len2) -> tuple[np.ndarray, ..
     return (seg.ravel()[pick], frac.ravel()[pick], foot_x.ravel()[pick], foot_y.ravel()[pick], flat[pick])
 
 
-def project_to_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Nearest point on a polyline for each query point.
-
-    points (m, 2+), polyline (n, 2+) -> distance (m,), arc length of the foot (m,), foot (m, 2).
-    """
-    pts = np.asarray(points, np.float64)[:, :2]
+def polyline_segments(polyline: np.ndarray) -> tuple[np.ndarray, ...]:
+    """What `project_to_polyline` derives from a polyline (n >= 2, 2+) before it looks at the points: the 2-D
+    line (n, 2), segment starts ax, ay, vectors sx, sy, squared lengths (clamped to 1e-12) (n-1,) each, and the
+    arc length at each vertex (n,). Kept by callers that project onto the same polyline again and again."""
     line = np.asarray(polyline, np.float64)[:, :2]
-    if len(line) == 1:
-        dist = np.linalg.norm(pts - line[0], axis=1)
-        return dist, np.zeros(len(pts)), np.broadcast_to(line[0], pts.shape).copy()
     ax, ay = line[:-1, 0], line[:-1, 1]  # (n-1,) segment starts
     sx, sy = line[1:, 0] - ax, line[1:, 1] - ay  # (n-1,) segment vectors
     raw_len2 = sx * sx + sy * sy  # (n-1,)
-    seg_len2 = np.maximum(raw_len2, 1e-12)
+    cum = np.zeros(len(line))  # arc_lengths(line), from the segment lengths at hand
+    np.cumsum(np.sqrt(raw_len2), out=cum[1:])
+    return line, ax, ay, sx, sy, np.maximum(raw_len2, 1e-12), cum
+
+
+def project_to_polyline(points: np.ndarray, polyline: np.ndarray,
+                        segments: tuple[np.ndarray, ...] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Nearest point on a polyline for each query point.
+
+    points (m, 2+), polyline (n, 2+) -> distance (m,), arc length of the foot (m,), foot (m, 2).
+    `segments`: `polyline_segments(polyline)` when the caller keeps it (n >= 2).
+    """
+    pts = np.asarray(points, np.float64)[:, :2]
+    if segments is None:
+        line = np.asarray(polyline, np.float64)[:, :2]
+        if len(line) == 1:
+            dist = np.linalg.norm(pts - line[0], axis=1)
+            return dist, np.zeros(len(pts)), np.broadcast_to(line[0], pts.shape).copy()
+        segments = polyline_segments(line)
+    line, ax, ay, sx, sy, seg_len2, cum = segments
     if len(pts) * len(ax) >= _PRUNE_ABOVE and np.isfinite(pts).all() and np.isfinite(line).all():
         best, frac, foot_x, foot_y, dist2 = _nearest_pruned(pts, line, ax, ay, sx, sy, seg_len2)
     else:
         best, frac, foot_x, foot_y, dist2 = _nearest_all(pts, ax, ay, sx, sy, seg_len2)
-    cum = np.zeros(len(line))  # arc_lengths(line), from the segment lengths at hand
-    np.cumsum(np.sqrt(raw_len2), out=cum[1:])
     arc = cum[best] + frac * np.sqrt(seg_len2[best])
     foot = np.empty((len(pts), 2))  # np.stack costs more than the rest on the short inputs of the path search
     foot[:, 0], foot[:, 1] = foot_x, foot_y

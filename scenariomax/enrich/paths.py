@@ -44,6 +44,7 @@ import numpy as np
 from scenariomax.enrich.geometry import (
     arc_lengths,
     point_at_arc,
+    polyline_segments,
     project_to_polyline,
     project_to_polylines,
     row_norm,
@@ -112,6 +113,14 @@ def _piece_length(piece: _Piece) -> float:
     return float(arc_lengths(piece.xyz)[-1]) if len(piece.xyz) > 1 else 0.0
 
 
+def _segments(lanes: Lanes, lane: int) -> tuple[np.ndarray, ...]:
+    """`polyline_segments` of a lane, built once per scenario: every search projects onto the same lanes."""
+    key = ("segments", lane)
+    if key not in lanes.memo:
+        lanes.memo[key] = polyline_segments(lanes.polyline(lane))
+    return lanes.memo[key]
+
+
 def start_lanes(lanes: Lanes, position: np.ndarray, yaw: float, settings: PathSettings) -> list[tuple[int, float]]:
     """(lane index, arc length of the projected start) of the lanes the path may start on, nearest first."""
     if lanes.num_lanes == 0:
@@ -125,7 +134,7 @@ def start_lanes(lanes: Lanes, position: np.ndarray, yaw: float, settings: PathSe
         aligned = near[lanes.point_tangent[near] @ heading > min_cos]
         found = []
         for lane in np.unique(lanes.point_lane[aligned]):
-            dist, arc, _ = project_to_polyline(position[None, :2], lanes.polyline(lane))
+            dist, arc, _ = project_to_polyline(position[None, :2], lanes.polyline(lane), _segments(lanes, lane))
             found.append((float(dist[0]), int(lane), float(arc[0])))
         if found:
             found.sort()
@@ -172,7 +181,8 @@ class _TrackNearLanes:
                               & (self._y <= high[1]))  # (k,)
         dist, arc = np.full(len(self.track), np.inf), np.full(len(self.track), np.nan)
         if near.size:  # each position's projection is computed on its own: a subset gives the same values
-            dist[near], arc[near], _ = project_to_polyline(self.track[near], self.lanes.polyline(lane))
+            dist[near], arc[near], _ = project_to_polyline(self.track[near], self.lanes.polyline(lane),
+                                                           _segments(self.lanes, lane))
         return dist, arc
 
 
@@ -245,11 +255,12 @@ def _lane_change(lanes: Lanes, lane_a: int, arc_from: float, lane_b: int, on_lan
     # Most changes end here (on WOMD ~9 in 10 of those offered): B no longer runs beside A where the change
     # would end. The end point alone tells, and a point's projection does not depend on the others projected
     # with it, so the whole blend is only projected for a change that passes (the same values either way).
-    end_offset, end_arc, _ = project_to_polyline(point_at_arc(line_a, cum_a, arcs[-1:]), line_b)
+    segments_b = _segments(lanes, lane_b)
+    end_offset, end_arc, _ = project_to_polyline(point_at_arc(line_a, cum_a, arcs[-1:]), line_b, segments_b)
     if end_offset[0] > settings.max_change_offset_m or end_arc[0] >= cum_b[-1] - 1e-3:
         return None  # B does not run alongside A where the change ends
     on_a = point_at_arc(line_a, cum_a, arcs)
-    offset, arc_b, _ = project_to_polyline(on_a, line_b)
+    offset, arc_b, _ = project_to_polyline(on_a, line_b, segments_b)
     if _direction_at(line_a, cum_a, arcs[-1]) @ _direction_at(line_b, cum_b, arc_b[-1]) <= 0.0:
         # B runs the other way (AV2 names the oncoming lane a neighbour): "changing" into it turns the path back
         # along itself, a loop past the log's end and outside the road edges
@@ -312,7 +323,7 @@ def _bridge(lanes: Lanes, end: np.ndarray, track: np.ndarray, rejoins: tuple[np.
         return None
     row = int(rows[0])
     lane = int(lane_of[row, int(np.argmax(ok[row]))])
-    _, arc, _ = project_to_polyline(later[row:row + 1], lanes.polyline(lane))
+    _, arc, _ = project_to_polyline(later[row:row + 1], lanes.polyline(lane), _segments(lanes, lane))
     foot = point_at_arc(lanes.polyline(lane), lanes.cumulative[lane], arc)[0]
     inner = later[:row]
     z = np.linspace(end[2], foot[2], len(inner) + 2)[1:-1]

@@ -51,6 +51,25 @@ def test_validate_reports_problems():
     assert "x has NaN" in problems and "exactly one SDC, found 2" in problems
 
 
+def test_validate_reports_timestamps_and_roadgraph_types():
+    # Timestamps must rise within each row (checked for all rows at once): a drop across two rows is no problem.
+    scenario = straight_road_scenario()
+    assert scenario.validate() == []
+    stamps = scenario.timestamp_micros
+    assert scenario.valid[0].any() and scenario.valid[1].any()
+    bad = straight_road_scenario()
+    row = np.flatnonzero(bad.valid[1])
+    bad.timestamp_micros[1, row[-1]] = bad.timestamp_micros[1, row[-2]]
+    assert "timestamps do not increase along a trajectory" in bad.validate()
+    later = straight_road_scenario()
+    later.timestamp_micros[0] = np.where(later.valid[0], stamps[0] + 10 ** 9, -1)  # row 0 far later than row 1
+    assert later.validate() == []
+    odd = straight_road_scenario()
+    odd.roadgraph_type[-1] = 99
+    odd.roadgraph_type[0] = 98
+    assert "unknown roadgraph types [98, 99]" in odd.validate()
+
+
 def test_real_womd_example_round_trips_exactly():
     data = next(iter_records(realdata_file(REAL_EXAMPLE)))
     original = decode_example(data)
