@@ -97,6 +97,47 @@ def state_table(states: list[bytes]) -> np.ndarray:
     return table
 
 
+_LANE_STATE_GETTER = operator.attrgetter("lane", "state", "stop_point.x", "stop_point.y", "stop_point.z")
+
+
+def lane_state_table(states: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Serialised TrafficSignalLaneStates -> lane (n,) int64, state (n,) int64, stop point (n, 3) float64: what
+    `attrgetter("lane", "state", "stop_point.x", "stop_point.y", "stop_point.z")` of the parsed messages gives.
+    Waymo writes every field, in order: lane (a varint), state (one byte), a full stop point. The records of each
+    length are decoded together; any other layout is parsed on its own."""
+    n = len(states)
+    lane, code, point = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros((n, 3))
+    if not states:
+        return lane, code, point
+    lengths = _lengths(states)
+    done = np.zeros(n, bool)
+    point_dtype, point_tags = _POINT_FULL
+    for size in np.unique(lengths).tolist():
+        k = size - 32  # lane varint bytes: tag, k, tag, state, tag, length 27, point (27)
+        if not 1 <= k <= 9:  # 9 bytes: up to 2^63 - 1; a 10-byte varint (a negative id) is parsed on its own
+            continue
+        rows = np.flatnonzero(lengths == size)  # (r,)
+        raw = np.frombuffer(b"".join([states[row] for row in rows.tolist()]), np.uint8).reshape(len(rows), size)
+        varint = raw[:, 1:1 + k]  # (r, k)
+        ok = ((raw[:, 0] == 0x08) & (varint[:, :-1] >= 0x80).all(axis=1) & (varint[:, -1] < 0x80)
+              & (raw[:, 1 + k] == 0x10) & (raw[:, 2 + k] < 0x80) & (raw[:, 3 + k] == 0x1A) & (raw[:, 4 + k] == 27))
+        found = np.ascontiguousarray(raw[:, 5 + k:]).view(point_dtype)[:, 0]  # (r,)
+        for tag, value in point_tags.items():
+            ok &= found[tag] == value
+        value = np.zeros(len(rows), np.int64)
+        for byte in range(k):  # little-endian 7-bit groups (9 of them: 63 bits, never the sign bit)
+            value |= (varint[:, byte] & 0x7F).astype(np.int64) << (7 * byte)
+        rows, found = rows[ok], found[ok]
+        lane[rows], code[rows] = value[ok], raw[ok, 2 + k]
+        point[rows, 0], point[rows, 1], point[rows, 2] = found["x"], found["y"], found["z"]
+        done[rows] = True
+    rest = np.flatnonzero(~done)
+    for row, values in zip(rest.tolist(), _parse_each(proto.TrafficSignalLaneStateProto, states, rest,
+                                                      _LANE_STATE_GETTER)):
+        lane[row], code[row], point[row] = values[0], values[1], values[2:]
+    return lane, code, point
+
+
 def point_table(points: list[bytes]) -> np.ndarray:
     """Serialised MapPoints -> (n, 3) float64 x, y, z (unset fields 0, as the parsed messages give)."""
     table = np.zeros((len(points), 3))

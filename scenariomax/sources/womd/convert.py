@@ -175,21 +175,26 @@ _LANE_STATE_GETTER = operator.attrgetter("lane", "state", "stop_point.x", "stop_
 def traffic_light_arrays(message, start: int, num_timesteps: int) -> dict[str, np.ndarray]:
     """(L, T) light arrays for one window, one row per controlled lane (sorted by lane id)."""
     steps = message.dynamic_map_states[start:start + num_timesteps]
-    # Every lane state read in one pass (attrgetter), then placed with numpy.
-    step_of = [step for step, dynamic in enumerate(steps) for _ in range(len(dynamic.lane_states))]
-    read = [values for dynamic in steps for values in map(_LANE_STATE_GETTER, dynamic.lane_states)]
-    lanes = sorted({values[0] for values in read})
+    step = np.repeat(np.arange(len(steps)), [len(dynamic.lane_states) for dynamic in steps])  # (k,)
+    if proto.is_bulk(message):  # serialised lane states, decoded with numpy
+        try:
+            lane, code, point = bulk.lane_state_table([report for dynamic in steps for report in dynamic.lane_states])
+        except ValueError as error:
+            raise ScenarioBuildError(str(error)) from None
+    else:  # every lane state read in one pass (attrgetter), then placed with numpy
+        read = [values for dynamic in steps for values in map(_LANE_STATE_GETTER, dynamic.lane_states)]
+        lane = np.array([values[0] for values in read], np.int64).reshape(-1)  # (k,)
+        code = np.array([values[1] for values in read], np.int64).reshape(-1)
+        point = np.array([values[2:] for values in read], np.float64).reshape(-1, 3)  # (k, 3)
+    lanes = np.unique(lane)  # (L,) sorted
     shape = (len(lanes), num_timesteps)
     state, lane_id = np.zeros(shape, np.int64), np.full(shape, -1, np.int64)
     valid = np.zeros(shape, bool)
     xyz = np.full((3,) + shape, -1.0, np.float32)
-    if read:
-        lane = np.array([values[0] for values in read], np.int64)  # (k,)
-        code = np.array([values[1] for values in read], np.int64)
-        point = np.array([values[2:] for values in read], np.float64)  # (k, 3)
-        row, step = np.searchsorted(lanes, lane), np.array(step_of, np.int64)
+    if len(lane):
+        row = np.searchsorted(lanes, lane)
         # A lane reported twice in one step: its last report counts (as when written one by one).
-        last = len(read) - 1 - np.unique((row * num_timesteps + step)[::-1], return_index=True)[1]
+        last = len(lane) - 1 - np.unique((row * num_timesteps + step)[::-1], return_index=True)[1]
         row, step, lane, code, point = row[last], step[last], lane[last], code[last], point[last]
         known = np.isin(code, list(sch.load_schema().enums["traffic_light_state"]))
         valid[row, step] = True

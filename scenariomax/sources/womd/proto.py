@@ -91,7 +91,8 @@ _ONEOF_FIELDS = {"MapFeature": ("lane", "road_line", "road_edge", "stop_sign", "
 # and read with numpy in one go instead of one Python object per state or point.
 _BULK_PACKAGE = "vmax.womd_bulk"
 _AS_BYTES = {("Track", "states"), ("LaneCenter", "polyline"), ("RoadEdge", "polyline"), ("RoadLine", "polyline"),
-             ("Crosswalk", "polygon"), ("SpeedBump", "polygon"), ("Driveway", "polygon"), ("StopSign", "position")}
+             ("Crosswalk", "polygon"), ("SpeedBump", "polygon"), ("Driveway", "polygon"), ("StopSign", "position"),
+             ("DynamicMapState", "lane_states")}
 
 
 def _build_pool(package: str, as_bytes: set) -> descriptor_pool.DescriptorPool:
@@ -127,6 +128,7 @@ ScenarioProto = _message_class("Scenario")
 MapFeatureProto = _message_class("MapFeature")
 ObjectStateProto = _message_class("ObjectState")
 MapPointProto = _message_class("MapPoint")
+TrafficSignalLaneStateProto = _message_class("TrafficSignalLaneState")
 ScenarioBulkProto = _message_class("Scenario", _BULK_POOL, _BULK_PACKAGE)
 
 

@@ -142,3 +142,53 @@ def test_map_points_of_cut_features_fall_back():
     for data in features[:4]:
         for cut in (1, 2, 5, len(data) - 1):
             assert bulk.feature_points([data[:cut]], [4])[0] is None
+
+
+def test_lane_state_table_is_the_regular_parse():
+    state_class = proto.TrafficSignalLaneStateProto
+    point = proto.MapPointProto
+    reports = [state_class(lane=lane, state=4, stop_point=point(x=1.5, y=-2.5, z=0.125))
+               for lane in (1, 127, 128, 300, 2 ** 21, 2 ** 40, 2 ** 63 - 1, -5)]  # 1..9 varint bytes; -5: 10
+    reports += [
+        state_class(lane=7, state=200, stop_point=point(x=1.0, y=2.0, z=3.0)),  # a state of two bytes
+        state_class(lane=7, state=3, stop_point=point(x=1.0, y=2.0)),  # stop point without z
+        state_class(lane=7, state=3),  # no stop point
+        state_class(state=3, stop_point=point(x=1.0, y=2.0, z=3.0)),  # lane 0: not written
+        state_class(),
+    ]
+    data = [report.SerializeToString() for report in reports]
+    data.append(state_class(stop_point=point(x=9.0, y=8.0, z=7.0)).SerializeToString()
+                + state_class(lane=12, state=5).SerializeToString())  # stop point first: 36 bytes, another order
+    data.append(b"\x08\x85\x00\x10\x01" + data[0][-29:])  # lane 5 as a two-byte varint: 34 bytes, Waymo's order
+    data.append(b"\x08\x07\x18\x05" + data[0][-29:])  # field 3 (unknown) where the state goes: Waymo's length
+    data.append(b"\x08\x07\x10\x05\x1a\x1b" + data[0][-27:].replace(b"\x11", b"\x19", 1))  # y's tag on a z
+    want = [bulk._LANE_STATE_GETTER(state_class.FromString(d)) for d in data]
+    lane, code, stop = bulk.lane_state_table(data)
+    np.testing.assert_array_equal(lane, [w[0] for w in want])
+    np.testing.assert_array_equal(code, [w[1] for w in want])
+    np.testing.assert_array_equal(stop, [w[2:] for w in want])
+    assert lane.dtype == code.dtype == np.int64
+    assert [len(array) for array in bulk.lane_state_table([])] == [0, 0, 0]
+    with pytest.raises(ValueError, match="not a WOMD Scenario message"):
+        bulk.lane_state_table([data[0][:-3]])
+
+
+def test_light_arrays_of_the_bulk_parse_are_the_regular_ones():
+    from scenariomax.sources.womd.convert import parse_scenario, traffic_light_arrays
+
+    message = proto.ScenarioProto()
+    for step in range(4):
+        dynamic = message.dynamic_map_states.add()
+        for lane, state in ((300, 3), (2, 99), (300, 4), (2 ** 40, 5)):
+            report = dynamic.lane_states.add(lane=lane, state=state)
+            report.stop_point.x, report.stop_point.y = step + lane, 1.5
+            if step != 2:
+                report.stop_point.z = -2.0
+    message.dynamic_map_states.add()
+    data = message.SerializeToString()
+    want = traffic_light_arrays(parse_scenario(data), 1, 4)
+    got = traffic_light_arrays(parse_scenario(data, bulk=True), 1, 4)
+    assert want.keys() == got.keys()
+    for key in want:
+        np.testing.assert_array_equal(got[key], want[key])
+        assert got[key].dtype == want[key].dtype
