@@ -455,13 +455,26 @@ def _covered_prefix(track: np.ndarray, travel: np.ndarray, path: np.ndarray, dis
     travelled. `dist`, `arc` (m,) are the nearest feet on the whole path; where that foot is out of
     order (the path passes the same place twice) the foot is looked for near the previous one.
     track (m, 2), travel (m,), path (q, 3) -> (count, (count,) arcs)"""
-    cum = arc_lengths(path)
-    feet = np.zeros(len(track))
-    prev_arc, prev_travel = 0.0, 0.0
+    m = len(track)
+    feet = np.zeros(m)
+    # The leading positions whose nearest foot is in order, in one pass (most paths cover most of the log): the
+    # loop's bounds from the running maximum of those feet, the same float arithmetic. The loop takes over at
+    # the first position that is not.
+    reach = np.maximum.accumulate(np.concatenate([[0.0], arc]))[:m]  # (m,) prev_arc: max(0, earlier feet)
+    before = np.concatenate([[0.0], travel[:-1]])  # (m,) prev_travel
+    ok = (dist <= tolerance) & (reach - 2.0 <= arc) & (arc <= reach + 1.5 * (travel - before) + 2.0)
+    start = m if ok.all() else int(ok.argmin())
+    if start == m:
+        return m, arc.copy()
+    feet[:start] = arc[:start]
+    prev_arc, prev_travel = float(reach[start]), float(before[start])
+    cum = None  # arc_lengths(path), when a foot is looked for near the previous one
     # Plain floats in the loop (numpy scalars cost ~10x more per operation; the arithmetic is the same).
-    for j, (moved, near, foot) in enumerate(zip(travel.tolist(), dist.tolist(), arc.tolist())):
+    for j, (moved, near, foot) in enumerate(zip(travel[start:].tolist(), dist[start:].tolist(),
+                                                arc[start:].tolist()), start):
         low, high = prev_arc - 2.0, prev_arc + 1.5 * (moved - prev_travel) + 2.0
         if near <= tolerance and not low <= foot <= high:
+            cum = arc_lengths(path) if cum is None else cum
             lo = max(int(np.searchsorted(cum, low)) - 1, 0)
             hi = min(int(np.searchsorted(cum, high)) + 1, len(cum))
             part = project_to_polyline(track[j:j + 1], path[lo:hi])

@@ -157,3 +157,50 @@ def test_covered_prefix_looks_near_the_last_foot_where_the_path_passes_twice():
     covered, feet = _covered_prefix(log, arc_lengths(log), path, dist, arc, 1.0)
     assert covered == 16
     np.testing.assert_allclose(feet, log[:, 0], atol=1e-6)  # the first leg, in order
+
+
+def _covered_prefix_one_by_one(track, travel, path, dist, arc, tolerance):
+    """_covered_prefix as a plain loop over the positions (the reference its vectorised start must match)."""
+    cum = arc_lengths(path)
+    feet = np.zeros(len(track))
+    prev_arc, prev_travel = 0.0, 0.0
+    for j in range(len(track)):
+        moved, near, foot = float(travel[j]), float(dist[j]), float(arc[j])
+        low, high = prev_arc - 2.0, prev_arc + 1.5 * (moved - prev_travel) + 2.0
+        if near <= tolerance and not low <= foot <= high:
+            lo = max(int(np.searchsorted(cum, low)) - 1, 0)
+            hi = min(int(np.searchsorted(cum, high)) + 1, len(cum))
+            part = project_to_polyline(track[j:j + 1], path[lo:hi])
+            near, foot = float(part[0][0]), float(part[1][0]) + float(cum[lo])
+        if near > tolerance or not low <= foot <= high:
+            return j, feet[:j]
+        feet[j] = foot
+        prev_arc, prev_travel = max(prev_arc, foot), moved
+    return len(track), feet
+
+
+def test_covered_prefix_is_the_loop_over_positions():
+    rng = np.random.default_rng(3)
+    loop = np.column_stack([30 * np.cos(np.linspace(0, 4 * np.pi, 400)), 30 * np.sin(np.linspace(0, 4 * np.pi, 400)),
+                            np.zeros(400)])  # a path around the same circle twice
+    paths = [line((0, 0), (80, 0), 81), loop, np.vstack([line((0, 0), (40, 0), 41), line((40, 0.5), (0, 0.5), 41)])]
+    stops = []
+    for path in paths:
+        for _ in range(40):
+            m = int(rng.integers(1, 60))
+            along = np.cumsum(rng.uniform(0.0, 1.5, m)) + rng.uniform(0, 5)
+            along += rng.choice([0.0, 1.0]) * rng.uniform(-2.6, 0.4, m)  # feet a little behind the last
+            along = np.maximum(along, 0.0)
+            track_xy = project_to_polyline(np.zeros((1, 2)), path)[2]  # a start on the path
+            track_xy = np.vstack([track_xy, path[np.minimum(along.astype(int), len(path) - 1), :2]])[1:]
+            track_xy = track_xy + rng.normal(0, rng.choice([0.1, 0.6, 2.0]), track_xy.shape)
+            if rng.random() < 0.2:
+                track_xy = track_xy[::-1].copy()  # backwards: feet out of order
+            travel = arc_lengths(track_xy)
+            dist, arc, _ = project_to_polyline(track_xy, path)
+            want = _covered_prefix_one_by_one(track_xy, travel, path, dist, arc, 1.0)
+            got = _covered_prefix(track_xy, travel, path, dist, arc, 1.0)
+            assert got[0] == want[0]
+            np.testing.assert_array_equal(got[1], want[1])
+            stops.append(want[0] / m)
+    assert min(stops) < 0.5 and max(stops) == 1.0  # both partly and wholly covered logs were tried
