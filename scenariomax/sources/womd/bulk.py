@@ -97,6 +97,68 @@ def state_table(states: list[bytes]) -> np.ndarray:
     return table
 
 
+def _states_start(track: bytes) -> int | None:
+    """Where the states of a serialised Track begin when it starts as Waymo writes it (id, then object type, each
+    optional), else None: a field boundary, walked to field by field."""
+    pos = 0
+    try:
+        for tag in (0x08, 0x10):  # id, object_type: varints
+            if track[pos] == tag:
+                pos = _skip_varint(track, pos + 1)
+    except IndexError:
+        return None
+    return pos if pos == len(track) or track[pos] == 0x1A else None
+
+
+def track_state_table(tracks: list[bytes], num_steps: int) -> np.ndarray | None:
+    """`state_table` of all the states of serialised Tracks (N * num_steps rows, track by track), decoded a whole
+    log at once, or None (the caller decodes state by state) unless every track is id, type and then exactly
+    `num_steps` states in Waymo's two layouts (all fields, 59 bytes; centre z and valid, 11 bytes) back to back
+    to its end. The record boundaries are checked as a chain: each record ends where the next begins, from the
+    first state field to the track's end, so no byte is read as a state that is not one."""
+    starts = [_states_start(track) for track in tracks]
+    if not tracks or None in starts or num_steps == 0:
+        return None
+    lengths = _lengths(tracks)  # (N,)
+    offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]])  # (N,) where each track begins in `data`
+    first = offsets + np.array(starts, np.int64)  # (N,) its first state field
+    data = np.frombuffer(b"".join(tracks), np.uint8)
+    full_size, z_size = _STATE_FULL[0].itemsize, _STATE_Z_ONLY[0].itemsize
+    # Record starts: the states field tag, a one-byte length of either layout, that layout's first tag.
+    found = np.flatnonzero(data[:-2] == 0x1A)  # (c,) every tag byte, and a few bytes of values
+    size, lead = data[found + 1], data[found + 2]
+    found = found[((size == full_size) & (lead == _STATE_FULL[1]["tag_center_x"]))
+                  | ((size == z_size) & (lead == _STATE_Z_ONLY[1]["tag_center_z"]))]
+    owner = np.searchsorted(offsets, found, side="right") - 1  # (c,) the track of each
+    found = found[found >= first[owner]]  # (c,) within the states of their track
+    if len(found) != len(tracks) * num_steps:
+        return None
+    records = found.reshape(len(tracks), num_steps)  # (N, T) if each track holds num_steps of them
+    ends = records + 2 + data[records + 1]  # (N, T) end of each record
+    if not (np.array_equal(records[:, 0], first) and np.array_equal(ends[:, :-1], records[:, 1:])
+            and np.array_equal(ends[:, -1], offsets + lengths)):
+        return None
+    records = records.ravel()
+    full = data[records + 1] == full_size  # (N * T,)
+    table = np.zeros((len(records), len(STATE_FIELDS) + 1))
+    for layout, rows in ((_STATE_FULL, np.flatnonzero(full)), (_STATE_Z_ONLY, np.flatnonzero(~full))):
+        dtype, tags = layout
+        raw = np.lib.stride_tricks.sliding_window_view(data, dtype.itemsize)[records[rows] + 2]  # (r, size) copied
+        decoded = raw.view(dtype)[:, 0]  # (r,)
+        ok = decoded["valid"] < 0x80  # a one-byte varint
+        for tag, value in tags.items():
+            ok &= decoded[tag] == value
+        if not ok.all():
+            return None
+        block = np.zeros((len(rows), len(STATE_FIELDS) + 1))  # (r, F + 1): filled by column, placed at once
+        for name in dtype.names:
+            if not name.startswith("tag_") and name != "valid":
+                block[:, STATE_FIELDS.index(name)] = decoded[name]
+        block[:, -1] = decoded["valid"] != 0
+        table[rows] = block
+    return table
+
+
 _LANE_STATE_GETTER = operator.attrgetter("lane", "state", "stop_point.x", "stop_point.y", "stop_point.z")
 
 

@@ -68,28 +68,34 @@ def parse_scenario(data: bytes, bulk: bool = False) -> proto.ScenarioProto:
     return message
 
 
-def parse_map_features(data: bytes) -> list[bytes] | None:
-    """The serialised map features of a Scenario message (for `map_polylines`), or None when it does not parse."""
+def parse_raw_scenario(data: bytes):
+    """The Scenario's tracks and map features as their serialised bytes (`proto.ScenarioRawProto`; for
+    `track_arrays` and `map_polylines`), or None when it does not parse."""
     try:
-        return list(proto.ScenarioMapFeaturesProto.FromString(data).map_features)
+        return proto.ScenarioRawProto.FromString(data)
     except (DecodeError, RuntimeError, ValueError):
         return None
 
 
 # --- tracks --------------------------------------------------------------------------------------
-def track_arrays(message) -> dict[str, np.ndarray]:
-    """Per-track state arrays over the whole log: (N, T) float64 for each state field, (N, T) bool valid."""
+def track_arrays(message, raw_tracks: list[bytes] | None = None) -> dict[str, np.ndarray]:
+    """Per-track state arrays over the whole log: (N, T) float64 for each state field, (N, T) bool valid.
+    `raw_tracks`: the message's tracks serialised (`parse_raw_scenario`), which lets a bulk message's states be
+    decoded a track at a time."""
     num_steps = len(message.timestamps_seconds) or max((len(t.states) for t in message.tracks), default=0)
     num_tracks = len(message.tracks)
     for track in message.tracks:
         if len(track.states) != num_steps:
             raise ScenarioBuildError(f"track {track.id} has {len(track.states)} states, expected {num_steps}")
-    if proto.is_bulk(message):  # serialised states, decoded with numpy
+    table = None
+    if proto.is_bulk(message) and raw_tracks is not None and len(raw_tracks) == num_tracks:
+        table = bulk.track_state_table(raw_tracks, num_steps)  # None: some track is laid out otherwise
+    if table is None and proto.is_bulk(message):  # serialised states, decoded with numpy
         try:
             table = bulk.state_table([state for track in message.tracks for state in track.states])
         except ValueError as error:
             raise ScenarioBuildError(str(error)) from None
-    else:  # every state read in one C-level pass (attrgetter: the fields, then valid); one array conversion
+    elif table is None:  # every state read in one C-level pass (attrgetter: the fields, then valid); one conversion
         table = np.array([state for track in message.tracks for state in map(_STATE_GETTER, track.states)],
                          np.float64)
     table = table.reshape(num_tracks, num_steps, len(_STATE_FIELDS) + 1)  # (N, T, F + 1)
@@ -129,7 +135,7 @@ def _point_arrays(containers: list, serialised: bool = False, features: list[byt
 def map_polylines(message, orient_edges: bool = True,
                   raw_features: list[bytes] | None = None) -> tuple[list[MapPolyline], list[LaneLinks]]:
     """Map features -> polylines (road edges oriented, road on the left, unless `orient_edges` is False) and lane
-    links. `raw_features`: the message's map features serialised (`parse_map_features`), which lets a bulk
+    links. `raw_features`: the message's map features serialised (`parse_raw_scenario`), which lets a bulk
     message's points be decoded a polyline at a time."""
     features: list[tuple] = []  # (id, roadgraph type, points container, speed limit, closed)
     links: list[LaneLinks] = []
@@ -271,12 +277,12 @@ def _waymo_paths(message, sdc_paths: str, sizes: Sizes) -> dict | None:
 
 def scenario_windows(message, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE, sdc_paths: str = SDC_PATHS_AUTO,
                      orient_edges: bool = True,
-                     raw_features: list[bytes] | None = None) -> Iterator[Scenario | ScenarioBuildError]:
+                     raw=None) -> Iterator[Scenario | ScenarioBuildError]:
     """Every 91-step window of one WOMD Scenario message, fitted to the budget. Windows that cannot be
     built are yielded as ScenarioBuildError (the caller records them as Failures). `sdc_paths` chooses
     who makes the SDC paths (see sdc_paths.py): Waymo's paths start at the log's own current step, so
     they go to that window only; the others are left to the reconstruction. `orient_edges`: see `WomdSource`.
-    `raw_features`: see `map_polylines`."""
+    `raw`: the record's `parse_raw_scenario` (faster decoding of the same values), or None."""
     scenario_id = message.scenario_id or "unnamed"
     num_steps = len(message.timestamps_seconds)
     current = message.current_time_index if message.HasField("current_time_index") else sizes.num_past
@@ -290,9 +296,9 @@ def scenario_windows(message, sizes: Sizes, stride: int = DEFAULT_WINDOW_STRIDE,
     except ScenarioBuildError as error:
         yield error
         return
-    tracks = track_arrays(message)
+    tracks = track_arrays(message, None if raw is None else raw.tracks)
     objects = _object_fields(message)
-    polylines, links = map_polylines(message, orient_edges, raw_features)
+    polylines, links = map_polylines(message, orient_edges, None if raw is None else raw.map_features)
     roadgraph = polylines_to_roadgraph(polylines)
     lane_graph = lane_graph_arrays(links, sizes.num_lane_links)
     seconds = np.asarray(message.timestamps_seconds, np.float64)

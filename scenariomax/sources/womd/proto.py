@@ -132,20 +132,23 @@ TrafficSignalLaneStateProto = _message_class("TrafficSignalLaneState")
 ScenarioBulkProto = _message_class("Scenario", _BULK_POOL, _BULK_PACKAGE)
 
 
-def _map_features_pool(package: str) -> descriptor_pool.DescriptorPool:
-    """A Scenario that declares only its map features, as their serialised bytes (the other fields are skipped)."""
+def _raw_pool(package: str) -> descriptor_pool.DescriptorPool:
+    """A Scenario that declares only its tracks and map features, as their serialised bytes (the other fields are
+    skipped)."""
     file_proto = descriptor_pb2.FileDescriptorProto(name=f"{package.replace('.', '_')}_scenario.proto",
                                                     package=package, syntax="proto2")
-    file_proto.message_type.add(name="Scenario").field.add(name="map_features", number=8, type=_F.TYPE_BYTES,
-                                                           label=_REPEATED)
+    message = file_proto.message_type.add(name="Scenario")
+    message.field.add(name="tracks", number=2, type=_F.TYPE_BYTES, label=_REPEATED)
+    message.field.add(name="map_features", number=8, type=_F.TYPE_BYTES, label=_REPEATED)
     pool = descriptor_pool.DescriptorPool()
     pool.Add(file_proto)
     return pool
 
 
-# The map features of a Scenario as bytes each: their points decoded a whole polyline at a time (bulk.py).
-_MAP_PACKAGE = "vmax.womd_map"
-ScenarioMapFeaturesProto = _message_class("Scenario", _map_features_pool(_MAP_PACKAGE), _MAP_PACKAGE)
+# The tracks and map features of a Scenario as bytes each: their states and points decoded a whole track or
+# polyline at a time (bulk.py).
+_RAW_PACKAGE = "vmax.womd_raw"
+ScenarioRawProto = _message_class("Scenario", _raw_pool(_RAW_PACKAGE), _RAW_PACKAGE)
 
 
 def is_bulk(message) -> bool:

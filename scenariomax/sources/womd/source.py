@@ -13,7 +13,7 @@ from scenariomax.sources.base import Failure, UnitItem, expand_inputs
 from scenariomax.sources.womd.convert import (
     SOURCE_NAME,
     ScenarioBuildError,
-    parse_map_features,
+    parse_raw_scenario,
     parse_scenario,
     scenario_windows,
 )
@@ -103,7 +103,7 @@ class WomdSource:
             message = parse_scenario(record, bulk=True)
             ref = message.scenario_id or ref
             for item in scenario_windows(message, self.budget, self.window_stride, self.sdc_paths,
-                                         self.orient_edges, parse_map_features(record)):
+                                         self.orient_edges, parse_raw_scenario(record)):
                 yield Failure(unit, ref, one_line(item)) if isinstance(item, Exception) else item
         except Exception as error:  # noqa: BLE001 - fault isolation: one bad scenario never stops the file
             yield Failure(unit, ref, one_line(error))

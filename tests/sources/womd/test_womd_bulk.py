@@ -112,11 +112,11 @@ def _field_bytes(number: int, payload: bytes) -> bytes:
 
 
 def test_map_points_decoded_by_run_are_the_regular_parse():
-    from scenariomax.sources.womd.convert import map_polylines, parse_map_features, parse_scenario
+    from scenariomax.sources.womd.convert import map_polylines, parse_raw_scenario, parse_scenario
 
     features, waymo = _map_features()
-    data = proto.ScenarioMapFeaturesProto(map_features=features).SerializeToString()
-    raw = parse_map_features(data)
+    data = proto.ScenarioRawProto(map_features=features).SerializeToString()
+    raw = list(parse_raw_scenario(data).map_features)
     assert raw == features
     regular, links = map_polylines(parse_scenario(data), orient_edges=False)
     fast, fast_links = map_polylines(parse_scenario(data, bulk=True), orient_edges=False, raw_features=raw)
@@ -192,3 +192,65 @@ def test_light_arrays_of_the_bulk_parse_are_the_regular_ones():
     for key in want:
         np.testing.assert_array_equal(got[key], want[key])
         assert got[key].dtype == want[key].dtype
+
+
+def _tracks_message(odd: str = "") -> bytes:
+    """A Scenario of three tracks, 5 steps each, in Waymo's layout (full states, z-only invalid ones) unless
+    `odd` names a change."""
+    import struct
+
+    message = proto.ScenarioProto()
+    message.timestamps_seconds.extend([0.1 * k for k in range(5)])
+    tricky = struct.unpack("<d", b"\x1a\x3b\x11\x00\x00\x00\xf0\x3f")[0]  # bytes that look like a state's start
+    for index, (track_id, kind) in enumerate(((3, 1), (2 ** 30, 2), (0, 0))):
+        track = message.tracks.add(id=track_id, object_type=kind)
+        for k in range(5):
+            if (k + index) % 3 == 0:
+                track.states.add(center_z=-1e-4 * k, valid=False)  # Waymo's invalid state
+            else:
+                track.states.add(center_x=1e4 * k + index, center_y=-k, center_z=0.5, length=4.5, width=1.9,
+                                 height=1.6, heading=0.3 * k, velocity_x=3.0, velocity_y=-1.0, valid=True)
+    if odd == "tricky value":
+        message.tracks[1].states[1].center_x = tricky
+    elif odd == "field unset":
+        message.tracks[2].states[3].ClearField("velocity_y")
+    elif odd == "valid z only":
+        message.tracks[0].states[0].valid = True
+    data = message.SerializeToString()
+    if odd == "fields reordered":  # a state of Waymo's size whose width comes before its length
+        track_class = proto._message_class("Track", proto._BULK_POOL, proto._BULK_PACKAGE)
+        state = proto.ObjectStateProto
+        track = track_class.FromString(proto.ScenarioRawProto.FromString(data).tracks[1])
+        track.states[0] = (state(center_x=1.0, center_y=2.0, center_z=3.0, width=1.5).SerializeToString()
+                           + state(length=4.0, height=1.2, heading=0.1, velocity_x=1.0, velocity_y=2.0,
+                                   valid=True).SerializeToString())
+        assert len(track.states[0]) == 59
+        tracks = list(proto.ScenarioRawProto.FromString(data).tracks)
+        tracks[1] = track.SerializeToString()
+        data = (proto.ScenarioProto(timestamps_seconds=message.timestamps_seconds).SerializeToString()
+                + b"".join(_field_bytes(2, track) for track in tracks))
+    if odd == "type first":  # object_type before id in track 0: not Waymo's order
+        track_class = proto._message_class("Track", proto._BULK_POOL, proto._BULK_PACKAGE)
+        tracks = list(proto.ScenarioRawProto.FromString(data).tracks)
+        tracks[0] = track_class(object_type=1).SerializeToString() + tracks[0]  # merged: type 1 twice, then id
+        data = (proto.ScenarioProto(timestamps_seconds=message.timestamps_seconds).SerializeToString()
+                + b"".join(_field_bytes(2, track) for track in tracks))
+    return data
+
+
+@pytest.mark.parametrize("odd, by_track", [("", True), ("tricky value", False), ("valid z only", True),
+                                           ("field unset", False), ("type first", False),
+                                           ("fields reordered", False)])
+def test_track_states_decoded_by_track_are_the_regular_parse(odd, by_track):
+    from scenariomax.sources.womd.convert import parse_raw_scenario, parse_scenario, track_arrays
+
+    data = _tracks_message(odd)
+    raw = parse_raw_scenario(data)
+    want = track_arrays(parse_scenario(data))
+    got = track_arrays(parse_scenario(data, bulk=True), raw.tracks)
+    assert want.keys() == got.keys()
+    for key in want:
+        np.testing.assert_array_equal(got[key], want[key])
+    decoded = bulk.track_state_table(list(raw.tracks), 5)
+    assert (decoded is not None) == by_track
+    assert bulk.track_state_table(list(raw.tracks), 4) is None  # not the number of states the tracks hold
