@@ -167,6 +167,8 @@ class _TrackNearLanes:
     def __init__(self, lanes: Lanes, track: np.ndarray, radius: float):
         self.lanes, self.track, self.radius = lanes, track, radius
         self._done: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._beside: dict[int, bool] = {}
+        self._inside: np.ndarray | None = None  # (K, m) positions in each lane's grown box, on the first projection
         # x and y apart: comparing (m, 2) and reducing over the 2-wide axis costs more than the test itself.
         self._x, self._y = track[:, 0], track[:, 1]
 
@@ -175,14 +177,27 @@ class _TrackNearLanes:
             self._done[lane] = self._project(lane)
         return self._done[lane]
 
+    def beside(self, lane: int) -> bool:
+        """Whether at least two positions lie within `radius` of the lane (asked again with every lane change
+        from or into it)."""
+        if lane not in self._beside:
+            self._beside[lane] = np.count_nonzero(self.of(lane)[0] < self.radius) >= 2
+        return self._beside[lane]
+
     def _project(self, lane: int) -> tuple[np.ndarray, np.ndarray]:
-        low, high = self.lanes.boxes[lane, :2] - self.radius - 1.0, self.lanes.boxes[lane, 2:] + self.radius + 1.0
-        near = np.flatnonzero((self._x >= low[0]) & (self._x <= high[0]) & (self._y >= low[1])
-                              & (self._y <= high[1]))  # (k,)
+        if self._inside is None:  # the box test of every lane at once: most lanes asked for lie away from the log
+            boxes = self.lanes.boxes
+            low, high = boxes[:, :2] - self.radius - 1.0, boxes[:, 2:] + self.radius + 1.0  # (K, 2)
+            self._inside = ((self._x >= low[:, 0:1]) & (self._x <= high[:, 0:1]) & (self._y >= low[:, 1:2])
+                            & (self._y <= high[:, 1:2]))  # (K, m)
+            self._far = (np.full(len(self.track), np.inf), np.full(len(self.track), np.nan))  # shared, read only
+        near = np.flatnonzero(self._inside[lane])  # (k,)
+        if not near.size:
+            return self._far
         dist, arc = np.full(len(self.track), np.inf), np.full(len(self.track), np.nan)
-        if near.size:  # each position's projection is computed on its own: a subset gives the same values
-            dist[near], arc[near], _ = project_to_polyline(self.track[near], self.lanes.polyline(lane),
-                                                           _segments(self.lanes, lane))
+        # Each position's projection is computed on its own: a subset gives the same values.
+        dist[near], arc[near], _ = project_to_polyline(self.track[near], self.lanes.polyline(lane),
+                                                       _segments(self.lanes, lane))
         return dist, arc
 
 
@@ -191,9 +206,11 @@ def _logged_change(on_lanes: _TrackNearLanes, lane_a: int, cum_a: np.ndarray, la
     """Where the log moves from lane A to lane B: (arcs along A, blend weights 0..1) or None."""
     if len(on_lanes.track) < 3:
         return None
+    # `on_lanes` was built with radius max_change_offset_m: fewer than two positions that near A or B leave fewer
+    # than two `between` them.
+    if not on_lanes.beside(lane_a) or not on_lanes.beside(lane_b):
+        return None
     dist_a, arc_a = on_lanes.of(lane_a)
-    if np.count_nonzero(dist_a < settings.max_change_offset_m) < 2:
-        return None  # the log never runs beside A: no need to look at B
     dist_b, _ = on_lanes.of(lane_b)
     between = ((dist_a < settings.max_change_offset_m) & (dist_b < settings.max_change_offset_m)
                & (arc_a >= arc_from - 1.0) & (arc_a < cum_a[-1] - 1e-3))
