@@ -316,14 +316,24 @@ def run_cumsum(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
     # Runs of similar length (within a factor 2) share a table, one column per run, padded with zeros:
     # cumsum down the columns is the same sequential sum as per run, for all runs of the table at once.
     size_class = np.ceil(np.log2(np.maximum(counts, 1))).astype(np.int64)  # (R,)
-    for cls in np.unique(size_class[counts > 0]):
-        members = np.flatnonzero(size_class == cls)  # (r,)
-        column = np.full(len(counts), -1, np.int64)
-        column[members] = np.arange(len(members))
-        rows = np.flatnonzero(column[run] >= 0)  # the values of these runs
-        table = np.zeros((int(counts[members].max()), len(members)))  # (longest run of the class, r)
-        table[place[rows], column[run[rows]]] = values[rows]
-        out[rows] = np.cumsum(table, axis=0)[place[rows], column[run[rows]]]
+    # The runs sorted by class once (and so their values): each class is then a slice of both.
+    order = np.argsort(size_class, kind="stable")  # (R,)
+    per_class = np.bincount(size_class, minlength=int(size_class.max()) + 1)  # (classes,) runs of each
+    column = np.empty(len(counts), np.int64)  # (R,) a run's column in its class's table
+    column[order] = np.arange(len(counts)) - np.repeat(run_starts(per_class), per_class)
+    rows_by_class = np.argsort(size_class[run], kind="stable")  # (n,) values grouped by class, in order
+    values_per_class = np.bincount(size_class, weights=counts, minlength=len(per_class)).astype(np.int64)
+    run_begin, row_begin = 0, 0
+    for num_runs, num_values in zip(per_class.tolist(), values_per_class.tolist()):
+        members = order[run_begin:run_begin + num_runs]  # (r,)
+        rows = rows_by_class[row_begin:row_begin + num_values]  # the values of these runs
+        run_begin, row_begin = run_begin + num_runs, row_begin + num_values
+        if num_values == 0:
+            continue
+        table = np.zeros((int(counts[members].max()), num_runs))  # (longest run of the class, r)
+        at = place[rows], column[run[rows]]
+        table[at] = values[rows]
+        out[rows] = np.cumsum(table, axis=0)[at]
     return out
 
 
