@@ -103,3 +103,22 @@ def test_light_evidence_reads_only_rows_that_can_count():
         want = light_evidence(scenario, np.array([*stop, 0.0]), np.array(direction), motion=every_row)
         for g, w in zip(got, want):
             np.testing.assert_array_equal(g, w)
+
+
+def test_evidence_of_many_lights_is_each_lights_own():
+    """with_inferred_lights reads the evidence of all its lights in one pass: the same as one light at a time."""
+    from scenariomax.enrich.traffic_lights import LightSettings, _evidence_of_lights, light_evidence, vehicle_motion
+
+    scenario = _light_scene(logged_state=sch.TL_UNKNOWN)
+    stops = np.array([[50.0, 0.0, 0.0], [60.0, -5.0, 1.0], [50.3, 0.2, 0.0], [-500.0, 0.0, 0.0]])
+    directions = np.array([[1.0, 0.0], [0.0, 1.0], [np.cos(0.1), np.sin(0.1)], [1.0, 0.0]])
+    settings = LightSettings(max_gap_steps=4)
+    greens, reds = _evidence_of_lights(scenario.num_timesteps, stops, directions, settings, vehicle_motion(scenario))
+    for stop, direction, green, red in zip(stops, directions, greens, reds):
+        want_green, want_red = light_evidence(scenario, stop, direction, settings)
+        np.testing.assert_array_equal(green, want_green)
+        np.testing.assert_array_equal(red, want_red)
+    assert greens[0].any() and reds[0].any() and greens[1].any() and not (greens[3].any() or reds[3].any())
+    empty = _evidence_of_lights(scenario.num_timesteps, np.zeros((0, 3)), np.zeros((0, 2)), settings,
+                                vehicle_motion(scenario))
+    assert [array.shape for array in empty] == [(0, scenario.num_timesteps)] * 2
