@@ -134,7 +134,7 @@ def varints(values: np.ndarray) -> bytes:
     # Shard arrays end in padding (-1: 10 bytes each): the trailing run of one value is one varint repeated.
     differs = np.flatnonzero(v != v[-1])  # (k,)
     head = int(differs[-1]) + 1 if differs.size else 0
-    tail = _varints(v[-1:]) * (len(v) - head)
+    tail = _varint(int(v[-1])) * (len(v) - head)  # one value: plain ints cost less than a numpy pass
     v = v[:head]
     if head == 0 or v.max() < 0x80:  # masks, types, small ids: one byte each
         return v.astype(np.uint8).tobytes() + tail
