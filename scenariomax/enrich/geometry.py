@@ -360,12 +360,14 @@ def run_interp(x: np.ndarray, x_run: np.ndarray, xp: np.ndarray, fp: np.ndarray,
     else:
         xj, xn = xp[j], xp[nxt]
     fj, fn = fp[j], fp[nxt]
+    on_point = (xj == x) | (xj == xn) | (x < xj)  # hits xp[j], the run's last point, or lies left of the run
     with np.errstate(divide="ignore", invalid="ignore"):
         slope = (fn - fj) / (xn - xj)
         out = slope * (x - xj) + fj
-        retry = np.isnan(out)  # numpy retries from the right end, then takes fp[j] on a flat stretch
+        # numpy retries from the right end, then takes fp[j] on a flat stretch (only off the points: those take
+        # fp[j] below, e.g. every query at a run's last point, where the slope is 0 / 0)
+        retry = np.isnan(out) & ~on_point
         if retry.any():
             out = np.where(retry, slope * (x - xn) + fn, out)
             out = np.where(np.isnan(out) & (fj == fn), fj, out)
-    on_point = (xj == x) | (xj == xn) | (x < xj)  # hits xp[j], the run's last point, or lies left of the run
     return np.where(on_point, fj, out)

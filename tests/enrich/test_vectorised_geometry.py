@@ -65,6 +65,19 @@ def test_run_interp_is_numpy_interp_per_run():
     np.testing.assert_array_equal(got, want)
 
 
+def test_run_interp_is_numpy_interp_with_flat_stretches_and_infinities():
+    # Repeated xp, infinite and NaN fp: the cases where numpy's formula retries from the right end.
+    xps = [np.array([0.0, 1.0, 1.0, 2.0, 3.0, 3.0]), np.array([-1.0, 0.5, 2.0, 4.0]), np.array([5.0])]
+    fps = [np.array([0.0, np.inf, np.inf, 1.0, -np.inf, 2.0]), np.array([np.nan, 1.0, np.inf, np.inf]),
+           np.array([7.0])]
+    xs = [np.array([-1.0, 0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0]),
+          np.array([-2.0, -1.0, 0.0, 0.5, 1.0, 3.0, 4.0, 9.0]), np.array([4.0, 5.0, 6.0])]
+    got = run_interp(np.concatenate(xs), np.repeat(np.arange(3), [len(x) for x in xs]), np.concatenate(xps),
+                     np.concatenate(fps), np.array([len(xp) for xp in xps]))
+    want = np.concatenate([np.interp(x, xp, fp) for x, xp, fp in zip(xs, xps, fps)])
+    np.testing.assert_array_equal(got, want)
+
+
 def _one_by_one(polylines, spacing=1.0, origin=None):
     """The former per-polyline loop."""
     xyz, dirs = [], []
