@@ -404,15 +404,18 @@ def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], 
 
 def _resample(pieces: tuple[_Piece, ...], settings: PathSettings) -> _Piece:
     """The pieces joined and resampled every `spacing_m`, cut to the point budget (lane index -1: none)."""
-    xyz = np.vstack([p.xyz for p in pieces])
+    xyz = np.concatenate([p.xyz for p in pieces])  # (n, 3) pieces are 2-D: np.vstack's value, fewer calls
     lane = np.concatenate([p.lane for p in pieces])
     cum = arc_lengths(xyz)
-    keep = np.concatenate([[True], np.diff(cum) > 1e-6])
+    keep = np.empty(len(cum), bool)  # the first point, then every point past the previous one
+    keep[0] = True
+    np.greater(cum[1:] - cum[:-1], 1e-6, out=keep[1:])
     xyz, lane, cum = xyz[keep], lane[keep], cum[keep]
     total = min(cum[-1], (settings.points_per_path - 1) * settings.spacing_m)
     targets = np.arange(0.0, total + 1e-6, settings.spacing_m)[: settings.points_per_path]
     points = point_at_arc(xyz, cum, targets) if len(xyz) > 1 else xyz[:1]
-    segment = np.clip(np.searchsorted(cum, targets, side="right") - 1, 0, len(lane) - 1)
+    # The segment of each target (searchsorted returns <= len: only the lower bound needs np.clip's test).
+    segment = np.maximum(np.searchsorted(cum, targets, side="right") - 1, 0)
     return _Piece(points, lane[segment][: len(points)])
 
 
