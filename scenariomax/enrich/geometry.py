@@ -91,11 +91,14 @@ def _feet(px: np.ndarray, py: np.ndarray, ax: np.ndarray, ay: np.ndarray, sx: np
     return frac, foot_x, foot_y, dist2
 
 
-def _nearest_all(pts, ax, ay, sx, sy, seg_len2) -> tuple[np.ndarray, ...]:
-    """Nearest segment of each point over all segments: index, frac, foot x, foot y, squared distance (m,) each."""
+def _nearest_all(pts, ax, ay, sx, sy, seg_len2, with_foot: bool = True) -> tuple[np.ndarray, ...]:
+    """Nearest segment of each point over all segments: index, frac, foot x, foot y (None unless `with_foot`),
+    squared distance (m,) each."""
     frac, foot_x, foot_y, dist2 = _feet(pts[:, 0:1], pts[:, 1:2], ax, ay, sx, sy, seg_len2)  # (m, k) each
     best = dist2.argmin(axis=1)  # first of equal minima
     rows = np.arange(len(pts))
+    if not with_foot:
+        return best, frac[rows, best], None, None, dist2[rows, best]
     return best, frac[rows, best], foot_x[rows, best], foot_y[rows, best], dist2[rows, best]
 
 
@@ -147,11 +150,12 @@ def polyline_segments(polyline: np.ndarray) -> tuple[np.ndarray, ...]:
     return line, ax, ay, sx, sy, np.maximum(raw_len2, 1e-12), cum
 
 
-def project_to_polyline(points: np.ndarray, polyline: np.ndarray,
-                        segments: tuple[np.ndarray, ...] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def project_to_polyline(points: np.ndarray, polyline: np.ndarray, segments: tuple[np.ndarray, ...] | None = None,
+                        with_foot: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Nearest point on a polyline for each query point.
 
-    points (m, 2+), polyline (n, 2+) -> distance (m,), arc length of the foot (m,), foot (m, 2).
+    points (m, 2+), polyline (n, 2+) -> distance (m,), arc length of the foot (m,), foot (m, 2) (None unless
+    `with_foot`: the path search asks hundreds of times for distances and arcs alone).
     `segments`: `polyline_segments(polyline)` when the caller keeps it (n >= 2).
     """
     pts = np.asarray(points, np.float64)[:, :2]
@@ -165,8 +169,10 @@ def project_to_polyline(points: np.ndarray, polyline: np.ndarray,
     if len(pts) * len(ax) >= _PRUNE_ABOVE and np.isfinite(pts).all() and np.isfinite(line).all():
         best, frac, foot_x, foot_y, dist2 = _nearest_pruned(pts, line, ax, ay, sx, sy, seg_len2)
     else:
-        best, frac, foot_x, foot_y, dist2 = _nearest_all(pts, ax, ay, sx, sy, seg_len2)
+        best, frac, foot_x, foot_y, dist2 = _nearest_all(pts, ax, ay, sx, sy, seg_len2, with_foot)
     arc = cum[best] + frac * np.sqrt(seg_len2[best])
+    if not with_foot:
+        return np.sqrt(dist2), arc, None
     foot = np.empty((len(pts), 2))  # np.stack costs more than the rest on the short inputs of the path search
     foot[:, 0], foot[:, 1] = foot_x, foot_y
     return np.sqrt(dist2), arc, foot

@@ -134,7 +134,8 @@ def start_lanes(lanes: Lanes, position: np.ndarray, yaw: float, settings: PathSe
         aligned = near[lanes.point_tangent[near] @ heading > min_cos]
         found = []
         for lane in np.unique(lanes.point_lane[aligned]):
-            dist, arc, _ = project_to_polyline(position[None, :2], lanes.polyline(lane), _segments(lanes, lane))
+            dist, arc, _ = project_to_polyline(position[None, :2], lanes.polyline(lane), _segments(lanes, lane),
+                                               with_foot=False)
             found.append((float(dist[0]), int(lane), float(arc[0])))
         if found:
             found.sort()
@@ -197,7 +198,7 @@ class _TrackNearLanes:
         dist, arc = np.full(len(self.track), np.inf), np.full(len(self.track), np.nan)
         # Each position's projection is computed on its own: a subset gives the same values.
         dist[near], arc[near], _ = project_to_polyline(self.track[near], self.lanes.polyline(lane),
-                                                       _segments(self.lanes, lane))
+                                                       _segments(self.lanes, lane), with_foot=False)
         return dist, arc
 
 
@@ -273,11 +274,12 @@ def _lane_change(lanes: Lanes, lane_a: int, arc_from: float, lane_b: int, on_lan
     # would end. The end point alone tells, and a point's projection does not depend on the others projected
     # with it, so the whole blend is only projected for a change that passes (the same values either way).
     segments_b = _segments(lanes, lane_b)
-    end_offset, end_arc, _ = project_to_polyline(point_at_arc(line_a, cum_a, arcs[-1:]), line_b, segments_b)
+    end_offset, end_arc, _ = project_to_polyline(point_at_arc(line_a, cum_a, arcs[-1:]), line_b, segments_b,
+                                                 with_foot=False)
     if end_offset[0] > settings.max_change_offset_m or end_arc[0] >= cum_b[-1] - 1e-3:
         return None  # B does not run alongside A where the change ends
     on_a = point_at_arc(line_a, cum_a, arcs)
-    offset, arc_b, _ = project_to_polyline(on_a, line_b, segments_b)
+    offset, arc_b, _ = project_to_polyline(on_a, line_b, segments_b, with_foot=False)
     if _direction_at(line_a, cum_a, arcs[-1]) @ _direction_at(line_b, cum_b, arc_b[-1]) <= 0.0:
         # B runs the other way (AV2 names the oncoming lane a neighbour): "changing" into it turns the path back
         # along itself, a loop past the log's end and outside the road edges
@@ -340,7 +342,8 @@ def _bridge(lanes: Lanes, end: np.ndarray, track: np.ndarray, rejoins: tuple[np.
         return None
     row = int(rows[0])
     lane = int(lane_of[row, int(np.argmax(ok[row]))])
-    _, arc, _ = project_to_polyline(later[row:row + 1], lanes.polyline(lane), _segments(lanes, lane))
+    _, arc, _ = project_to_polyline(later[row:row + 1], lanes.polyline(lane), _segments(lanes, lane),
+                                    with_foot=False)
     foot = point_at_arc(lanes.polyline(lane), lanes.cumulative[lane], arc)[0]
     inner = later[:row]
     z = np.linspace(end[2], foot[2], len(inner) + 2)[1:-1]

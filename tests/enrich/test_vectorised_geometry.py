@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenariomax.enrich.geometry import arc_lengths, project_to_polyline, run_cumsum, run_interp
+from scenariomax.enrich.geometry import (
+    arc_lengths,
+    polyline_segments,
+    project_to_polyline,
+    run_cumsum,
+    run_interp,
+)
 from scenariomax.enrich.roadgraph import (
     MapPolyline,
     direction_vectors,
@@ -40,6 +46,11 @@ def test_projection_matches_the_reference_bit_for_bit(seed):
         points = line[rng.integers(0, n, m), :2] + rng.normal(size=(m, 2)) * 5
         for got, want in zip(project_to_polyline(points, line), _reference_projection(points, line)):
             np.testing.assert_array_equal(got, want)
+        dist, arc, foot = project_to_polyline(points, line, polyline_segments(line), with_foot=False)
+        want_dist, want_arc, _ = _reference_projection(points, line)
+        np.testing.assert_array_equal(dist, want_dist)
+        np.testing.assert_array_equal(arc, want_arc)
+        assert foot is None
 
 
 @pytest.mark.parametrize("repeat", [1, 4, 9])  # 8 runs: one np.cumsum per run; 32, 72 runs: the tables
