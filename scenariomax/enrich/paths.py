@@ -38,6 +38,7 @@ nearest heading-aligned lane within `max_change_offset_m` (-1 when none, as on a
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -351,6 +352,18 @@ def _bridge(lanes: Lanes, end: np.ndarray, track: np.ndarray, rejoins: tuple[np.
     return _Piece(xyz, np.full(len(xyz), lane)), lane, float(arc[0])
 
 
+def _may_bridge(end: np.ndarray, track_box: tuple[float, float, float, float] | None, max_gap: float) -> bool:
+    """False when `_bridge` from lane end `end` finds no logged position within `max_gap` for sure: its distance
+    to the log's box (min x, min y, max x, max y) is no more than that to any position, in floats too (each
+    step rounds monotonically). None: fewer than two positions, where `_bridge` finds none either."""
+    if track_box is None:
+        return False
+    x, y = float(end[0]), float(end[1])
+    dx = max(track_box[0] - x, x - track_box[2], 0.0)
+    dy = max(track_box[1] - y, y - track_box[3], 0.0)
+    return not math.sqrt(dx * dx + dy * dy) > max_gap
+
+
 def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], track: np.ndarray,
                track_yaw: np.ndarray, settings: PathSettings) -> list[tuple[_Piece, ...]]:
     """Candidate paths as piece sequences (depth-first, log-consistent branches first)."""
@@ -358,6 +371,8 @@ def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], 
     hits = _lane_hits(lanes, track, settings.track_hit_radius_m)
     on_lanes = _TrackNearLanes(lanes, track, settings.max_change_offset_m)
     rejoins = None  # _rejoin_candidates, on the first bridge
+    # The log's bounding box: most lane ends lie further from it than a bridge may start (plain floats).
+    track_box = (*track.min(axis=0).tolist(), *track.max(axis=0).tolist()) if len(track) >= 2 else None
     # Lane changes seen by this search: branches meet again at the same lane (entered at arc 0 from different
     # predecessors) and would rebuild the same change (~1 in 6 on WOMD); the result depends on nothing else.
     known_changes: dict[tuple[int, float, int], tuple[_Piece, float] | None] = {}
@@ -387,9 +402,10 @@ def _enumerate(lanes: Lanes, graph: LaneGraph, starts: list[tuple[int, float]], 
         successors = [s for s in graph.successors[lane] if s not in visited]
         bridge = None
         if total < target and settings.bridge_gaps and not any(hits[s] > 0 for s in successors):
-            if rejoins is None:
-                rejoins = _rejoin_candidates(lanes, track, track_yaw, settings)
-            bridge = _bridge(lanes, rest[-1], track, rejoins, visited, settings)
+            if _may_bridge(rest[-1], track_box, settings.max_bridge_start_gap_m):
+                if rejoins is None:
+                    rejoins = _rejoin_candidates(lanes, track, track_yaw, settings)
+                bridge = _bridge(lanes, rest[-1], track, rejoins, visited, settings)
         if total >= target or not (successors or bridge):
             results.append(pieces + (piece,))
         else:

@@ -105,3 +105,21 @@ def test_an_oncoming_neighbour_is_no_lane_change_and_no_path_turns_back():
         assert (np.diff(points[:, 0]) > -1e-3).all(), f"path {p} turns back west: {points[-1]}"
         assert 2 not in set(out.path_lane_id[p][out.path_valid[p]])
     assert any(3 in set(out.path_lane_id[p][out.path_valid[p]]) for p in range(10))
+
+
+def test_may_bridge_is_false_only_where_no_logged_position_is_near():
+    from scenariomax.enrich.geometry import row_norm
+    from scenariomax.enrich.paths import _may_bridge
+
+    rng = np.random.default_rng(5)
+    skipped = 0
+    for _ in range(300):
+        track = rng.normal(size=(int(rng.integers(2, 30)), 2)) * rng.uniform(0.1, 20) + rng.uniform(-1e4, 1e4, 2)
+        box = (*track.min(axis=0).tolist(), *track.max(axis=0).tolist())
+        for end in track[rng.integers(0, len(track), 4)] + rng.normal(size=(4, 2)) * rng.uniform(0.1, 30):
+            gap = float(row_norm(track - end).min())  # as _bridge measures it
+            if not _may_bridge(np.array([*end, 0.0]), box, 6.0):
+                assert gap > 6.0
+                skipped += 1
+    assert skipped > 100
+    assert not _may_bridge(np.zeros(3), None, 6.0)
