@@ -256,8 +256,7 @@ def _direction_at(line: np.ndarray, cum: np.ndarray, arc: float) -> np.ndarray:
 def _lane_change(lanes: Lanes, lane_a: int, arc_from: float, lane_b: int, on_lanes: _TrackNearLanes,
                  settings: PathSettings) -> tuple[_Piece, float] | None:
     """The piece from `arc_from` on A through the blend onto B, and the arc on B where it lands."""
-    line_a, cum_a = lanes.polyline(lane_a), lanes.cumulative[lane_a]
-    line_b, cum_b = lanes.polyline(lane_b), lanes.cumulative[lane_b]
+    cum_a = lanes.cumulative[lane_a]
     logged = _logged_change(on_lanes, lane_a, cum_a, lane_b, arc_from, settings)
     if logged is not None:
         arcs, weights = logged
@@ -270,7 +269,8 @@ def _lane_change(lanes: Lanes, lane_a: int, arc_from: float, lane_b: int, on_lan
         u = (arcs - start) / (stop - start)
         weights = u * u * (3.0 - 2.0 * u)
     else:
-        return None
+        return None  # most offers end here (agents' searches): the polylines are only looked up past it
+    line_a, line_b, cum_b = lanes.polyline(lane_a), lanes.polyline(lane_b), lanes.cumulative[lane_b]
     # Most changes end here (on WOMD ~9 in 10 of those offered): B no longer runs beside A where the change
     # would end. The end point alone tells, and a point's projection does not depend on the others projected
     # with it, so the whole blend is only projected for a change that passes (the same values either way).
