@@ -17,6 +17,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from scenariomax import schema as sch
+from scenariomax.enrich.geometry import row_norm
 from scenariomax.enrich.lane_graph import LaneGraph
 from scenariomax.enrich.lanes import Lanes, nearest_lane_points
 from scenariomax.enrich.lanes import edge_tree as shared_edge_tree
@@ -45,10 +46,10 @@ class ControllableStats:
 def is_moving(x: np.ndarray, y: np.ndarray, settings: ControllableSettings = ControllableSettings()) -> bool:
     """True unless the (fully valid) track looks parked. (T,), (T,) -> bool"""
     xy = np.stack([x, y], 1).astype(np.float64)
-    travel = np.linalg.norm(xy - xy[0], axis=1).max(initial=0.0)
+    travel = row_norm(xy - xy[0]).max(initial=0.0)  # row_norm: np.linalg.norm(axis=1)'s bits, fewer calls
     window = STEPS_PER_SECOND
     if len(xy) > window:
-        speed = np.linalg.norm(xy[window:] - xy[:-window], axis=1).max() * STEPS_PER_SECOND / window
+        speed = row_norm(xy[window:] - xy[:-window]).max() * STEPS_PER_SECOND / window
     else:
         speed = 0.0
     return bool(travel > settings.min_travel_m or speed > settings.min_speed_mps)
