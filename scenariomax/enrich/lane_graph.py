@@ -66,12 +66,11 @@ def graph_from_scenario_links(scenario: Scenario, lanes: Lanes) -> LaneGraph:
     tables = {}
     for name in ("lane_successors", "lane_predecessors", "lane_left_neighbors", "lane_right_neighbors"):
         pairs = []
-        for lane_id, is_valid, row in zip(lane_ids, lane_valid, getattr(scenario, name).tolist()):
-            if not is_valid or lane_id not in index_of:
-                continue
-            for other in row:
-                if other >= 0 and other in index_of:
-                    pairs.append((index_of[lane_id], index_of[other]))
+        table = getattr(scenario, name)  # (L, K), padded with -1
+        rows, columns = np.nonzero(table >= 0)  # the links only, row by row in order (most slots are padding)
+        for row, other in zip(rows.tolist(), table[rows, columns].tolist()):
+            if lane_valid[row] and lane_ids[row] in index_of and other in index_of:
+                pairs.append((index_of[lane_ids[row]], index_of[other]))
         tables[name] = _as_tuples(np.array(pairs, np.int64).reshape(-1, 2), lanes.num_lanes)
     return LaneGraph(tables["lane_successors"], tables["lane_predecessors"],
                      tables["lane_left_neighbors"], tables["lane_right_neighbors"])

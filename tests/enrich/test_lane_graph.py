@@ -61,3 +61,25 @@ def test_explicit_links_win_over_geometry():
     assert not rebuilt
     assert graph.successors[lanes.index_of[1]] == ()  # the source says so, geometry would link them
     assert _ids(lanes, graph.predecessors[lanes.index_of[2]]) == [1]
+
+
+def test_explicit_links_skip_padding_invalid_rows_and_absent_lanes():
+    from scenariomax.enrich.lane_graph import graph_from_scenario_links
+
+    polylines = [MapPolyline(k, LANE, line((0, 4.0 * k), (30, 4.0 * k))) for k in (1, 2, 3, 4)]
+    links = lane_graph_arrays([LaneLinks(1, successors=(2, 99, 3), left_neighbors=(4,)), LaneLinks(2, successors=(3,)),
+                               LaneLinks(3, predecessors=(1, 2, 2)), LaneLinks(77, successors=(1,)),
+                               LaneLinks(4, right_neighbors=(1,))], num_lane_links=4)
+    links["lane_successors"][1] = [-1, 3, -1, 1]  # padding between links
+    links["lane_valid"][4] = False  # lane 4's row is not read
+    scenario = make_scenario(polylines, [track(straight_xy(0, 5))], **links)
+    lanes = extract_lanes(scenario)
+    graph = graph_from_scenario_links(scenario, lanes)
+    index = {int(lane_id): k for k, lane_id in enumerate(lanes.ids)}
+    named = {name: {int(lanes.ids[a]): [int(lanes.ids[b]) for b in row] for a, row in enumerate(getattr(graph, name))}
+             for name in ("successors", "predecessors", "left", "right")}
+    assert named["successors"] == {1: [2, 3], 2: [3, 1], 3: [], 4: []}
+    assert named["predecessors"] == {1: [], 2: [], 3: [1, 2], 4: []}  # a link given twice counts once
+    assert named["left"] == {1: [4], 2: [], 3: [], 4: []}
+    assert named["right"] == {1: [], 2: [], 3: [], 4: []}  # lane 4's row is invalid
+    assert set(index) == {1, 2, 3, 4}
