@@ -268,9 +268,9 @@ def _validate_roadgraph(s: Scenario) -> list[str]:
     if problems:
         return problems
     valid = s.roadgraph_valid
-    if not np.all(np.isfinite(s.roadgraph_xyz[valid])) or not np.all(np.isfinite(s.roadgraph_dir[valid])):
+    d = s.roadgraph_dir[valid]  # (v, 3): norm(d, axis=-1)'s bits below, without the slow 3-wide reduction
+    if not np.all(np.isfinite(s.roadgraph_xyz[valid])) or not np.all(np.isfinite(d)):
         problems.append("roadgraph has NaN or infinite values at valid points")
-    d = s.roadgraph_dir[valid]  # (v, 3): norm(d, axis=-1)'s bits, without the slow 3-wide reduction
     norms = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
     if norms.size and np.any((norms > 1.01) | ((norms < 0.99) & (norms > 1e-3))):
         problems.append("roadgraph_dir has vectors that are neither unit nor zero")
