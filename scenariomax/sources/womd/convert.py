@@ -51,6 +51,7 @@ KNOWN_OBJECT_TYPES = (sch.OBJECT_TYPE_VEHICLE, sch.OBJECT_TYPE_PEDESTRIAN, sch.O
 _STATE_FIELDS = bulk.STATE_FIELDS
 _STATE_GETTER = operator.attrgetter(*_STATE_FIELDS, "valid")
 _POINT_GETTER = operator.attrgetter("x", "y", "z")
+_FEATURE_ID = operator.attrgetter("feature_id")
 
 
 class ScenarioBuildError(ValueError):
@@ -148,9 +149,10 @@ def map_polylines(message, orient_edges: bool = True,
             limit = lane.speed_limit_mph * MPH_TO_MPS if lane.speed_limit_mph > 0 else -1.0
             features.append((fid, LANE_TYPES.get(lane.type, sch.RG_LANE_SURFACE_STREET), lane.polyline,
                              float(limit), False))
-            links.append(LaneLinks(fid, successors=list(lane.exit_lanes), predecessors=list(lane.entry_lanes),
-                                   left_neighbors=[n.feature_id for n in lane.left_neighbors],
-                                   right_neighbors=[n.feature_id for n in lane.right_neighbors]))
+            # Positional (successors, predecessors, left, right neighbours): keywords cost more per lane.
+            links.append(LaneLinks(fid, list(lane.exit_lanes), list(lane.entry_lanes),
+                                   list(map(_FEATURE_ID, lane.left_neighbors)),
+                                   list(map(_FEATURE_ID, lane.right_neighbors))))
         elif kind == "road_line":
             features.append((fid, ROAD_LINE_TYPES.get(feature.road_line.type, 0), feature.road_line.polyline,
                              -1.0, False))
