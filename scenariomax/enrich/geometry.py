@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -347,6 +349,28 @@ def run_cumsum(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return out
 
 
+def _last_at_or_below(x: np.ndarray, x_run: np.ndarray, xp: np.ndarray, xp_run: np.ndarray,
+                      starts: np.ndarray) -> np.ndarray:
+    """Index of the last xp <= x[k] within run x_run[k] (the run's start - 1 when none): one searchsorted for all
+    runs. xp (n,) increasing within each run, runs back to back (xp_run (n,) ascending). -> (m,)"""
+    scale = max(float(np.abs(xp).max(initial=0.0)), float(np.abs(x).max(initial=0.0)), 1.0)
+    if math.isfinite(scale):
+        # Each run's values shifted by its own multiple of a power of two over 4x every |value|: the runs stay
+        # apart and in order, and rounding keeps the order within a run except that a query may round onto a
+        # key just above it. Those few are searched again below, exactly.
+        span = 2.0 ** (math.ceil(math.log2(scale)) + 2)
+        j = np.searchsorted(xp + xp_run * span, x + x_run * span, side="right") - 1  # (m,)
+        again = np.flatnonzero((j >= starts[x_run]) & (xp[np.maximum(j, 0)] > x))
+        if not again.size:
+            return j
+    else:  # not finite: every query searched exactly
+        j, again = np.zeros(len(x), np.int64), np.arange(len(x))
+    # (run, value) pairs as complex numbers sort lexicographically: an exact searchsorted for all runs.
+    keys = xp_run + 1j * xp  # (n,)
+    j[again] = np.searchsorted(keys, x_run[again] + 1j * x[again], side="right") - 1
+    return j
+
+
 def run_interp(x: np.ndarray, x_run: np.ndarray, xp: np.ndarray, fp: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """np.interp(x[k], xp_r, fp_r) for every query k against its run r = x_run[k], bit for bit (numpy's
     formula: fp[j] where x hits xp[j] or lies outside, else slope * (x - xp[j]) + fp[j]).
@@ -356,9 +380,7 @@ def run_interp(x: np.ndarray, x_run: np.ndarray, xp: np.ndarray, fp: np.ndarray,
     xp, fp = np.asarray(xp, np.float64), np.asarray(fp, np.float64)
     starts = run_starts(counts)
     last = starts + np.asarray(counts, np.int64) - 1  # (R,)
-    # (run, value) pairs as complex numbers sort lexicographically: one exact searchsorted for all runs.
-    keys = np.repeat(np.arange(len(starts)), counts) + 1j * xp  # (n,)
-    j = np.searchsorted(keys, x_run + 1j * x, side="right") - 1  # (m,) last xp <= x in the run
+    j = _last_at_or_below(x, x_run, xp, np.repeat(np.arange(len(starts)), counts), starts)
     j = np.clip(j, starts[x_run], last[x_run])  # left of the run: its first point (numpy's default)
     nxt = np.minimum(j + 1, last[x_run])
     if fp.ndim == 2:

@@ -325,3 +325,30 @@ def test_pair_keys_order_as_the_rows_do():
         np.testing.assert_array_equal(key_first, first)
         np.testing.assert_array_equal(key_inverse.reshape(-1), inverse.reshape(-1))
         np.testing.assert_array_equal(key_counts, counts)
+
+
+def test_run_search_is_exact_where_offset_keys_round_together():
+    # Values 1e-14 apart near 1, in the later of 200 runs: shifted by their run's offset (a multiple of 8), they
+    # round to the same float, and the queries between them must be searched exactly.
+    from scenariomax.enrich.geometry import _last_at_or_below, run_starts
+
+    rng = np.random.default_rng(2)
+    counts = rng.integers(1, 6, 200)
+    xps = [1.0 + np.cumsum(rng.integers(0, 3, c)) * 1e-14 for c in counts]
+    xp = np.concatenate(xps)
+    x_run = np.concatenate([np.full(3 * c, r) for r, c in enumerate(counts)])
+    x = np.concatenate([np.concatenate([v, v - 5e-15, v + 5e-15]) for v in xps])
+    starts = run_starts(counts)
+    xp_run = np.repeat(np.arange(len(counts)), counts)
+    got = _last_at_or_below(x, x_run, xp, xp_run, starts)
+    want = [starts[r] + int(np.searchsorted(xps[r], value, side="right")) - 1 for value, r in zip(x, x_run)]
+    np.testing.assert_array_equal(got, want)
+    span = 2.0 ** (np.ceil(np.log2(max(np.abs(xp).max(), np.abs(x).max(), 1.0))) + 2)  # as _last_at_or_below
+    offset = span * np.arange(len(counts))
+    keys, queries = xp + offset[xp_run], x + offset[x_run]
+    merged = np.searchsorted(keys, queries, side="right") - 1 != got
+    assert merged.any()  # the case the exact search is for did occur
+    fp = rng.normal(size=len(xp))
+    np.testing.assert_array_equal(run_interp(x, x_run, xp, fp, counts),
+                                  [np.interp(value, xps[r], fp[starts[r]:starts[r] + counts[r]])
+                                   for value, r in zip(x, x_run)])
