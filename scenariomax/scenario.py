@@ -276,7 +276,9 @@ def _validate_roadgraph(s: Scenario) -> list[str]:
         problems.append("roadgraph_dir has vectors that are neither unit nor zero")
     known = set(sch.load_schema().enums["roadgraph_type"])
     types = s.roadgraph_type[valid]  # (v,) in runs of one polyline: its distinct values are those of the run starts
-    bad = set(np.unique(types[np.concatenate([[True], types[1:] != types[:-1]])]).tolist()) - known
+    run_start = np.ones(len(types), bool)
+    run_start[1:] = types[1:] != types[:-1]
+    bad = set(np.unique(types[run_start]).tolist()) - known
     if bad:
         problems.append(f"unknown roadgraph types {sorted(bad)}")
     return problems
