@@ -77,14 +77,29 @@ def controllable_mask(scenario: Scenario, lanes: Lanes,
     edge_dir = scenario.roadgraph_dir[edges, :2].astype(np.float64)
     edge_tree = shared_edge_tree(lanes, edge_xy) if len(edge_xy) else None
     mask = np.zeros(scenario.num_objects, bool)
-    full = scenario.valid.all(axis=1) & (scenario.object_type == sch.OBJECT_TYPE_VEHICLE)
-    for index in np.flatnonzero(full):
-        if not is_moving(scenario.x[index], scenario.y[index], settings):
-            continue
-        xy = np.stack([scenario.x[index], scenario.y[index]], 1).astype(np.float64)
-        mask[index] = bool(_on_road(scenario, lanes, xy, edge_tree, edge_xy, edge_dir, settings).all())
+    full = np.flatnonzero(scenario.valid.all(axis=1) & (scenario.object_type == sch.OBJECT_TYPE_VEHICLE))
+    moving = full[_moving_rows(scenario.x[full], scenario.y[full], settings)]  # (k,)
+    if len(moving):
+        # Every moving vehicle's positions in one query (each point's answer is its own), then per vehicle.
+        xy = np.stack([scenario.x[moving], scenario.y[moving]], -1).astype(np.float64)  # (k, T, 2)
+        on_road = _on_road(scenario, lanes, xy.reshape(-1, 2), edge_tree, edge_xy, edge_dir, settings)
+        mask[moving] = on_road.reshape(len(moving), -1).all(axis=1)
     mask[scenario.sdc_index] = True
     return mask
+
+
+def _moving_rows(x: np.ndarray, y: np.ndarray, settings: ControllableSettings) -> np.ndarray:
+    """`is_moving` of every row at once, the same arithmetic. (k, T), (k, T) -> (k,) bool"""
+    xy = np.stack([x, y], -1).astype(np.float64)  # (k, T, 2)
+    if len(xy) == 0:
+        return np.zeros(0, bool)
+    travel = row_norm(xy - xy[:, :1]).max(axis=1, initial=0.0)  # (k,)
+    window = STEPS_PER_SECOND
+    if xy.shape[1] > window:
+        speed = row_norm(xy[:, window:] - xy[:, :-window]).max(axis=1) * STEPS_PER_SECOND / window
+    else:
+        speed = np.zeros(len(xy))
+    return (travel > settings.min_travel_m) | (speed > settings.min_speed_mps)
 
 
 def nearest_first(scenario: Scenario, agents: np.ndarray) -> np.ndarray:

@@ -122,3 +122,42 @@ def test_evidence_of_many_lights_is_each_lights_own():
     empty = _evidence_of_lights(scenario.num_timesteps, np.zeros((0, 3)), np.zeros((0, 2)), settings,
                                 vehicle_motion(scenario))
     assert [array.shape for array in empty] == [(0, scenario.num_timesteps)] * 2
+
+
+def test_controllable_mask_of_all_vehicles_at_once_is_one_by_one():
+    """controllable_mask tests every moving vehicle in one pass: the labels of the per-vehicle loop."""
+    from scipy.spatial import cKDTree
+
+    from scenariomax.enrich.controllable import (
+        ControllableSettings,
+        _moving_rows,
+        _on_road,
+        controllable_mask,
+        is_moving,
+    )
+    from scenariomax.enrich.lanes import extract_lanes
+    from scenariomax.enrich.orientation import with_edges_oriented
+
+    rng = np.random.default_rng(4)
+    objects = [track(straight_xy(10, 10.0))]
+    for _ in range(14):  # on the lane, beside it, beyond an edge, parked, crawling
+        objects.append(track(straight_xy(rng.uniform(0, 300), rng.choice([0.0, 0.02, 0.3, 8.0]),
+                                         y=rng.choice([0.0, 1.0, -4.0, 6.5]))))
+    scenario = make_scenario(_road(), objects)
+    lanes = extract_lanes(scenario)
+    scenario = with_edges_oriented(scenario, lanes)
+    settings = ControllableSettings()
+    got = controllable_mask(scenario, lanes, settings)
+    np.testing.assert_array_equal(_moving_rows(scenario.x, scenario.y, settings),
+                                  [is_moving(x, y, settings) for x, y in zip(scenario.x, scenario.y)])
+    edges = np.isin(scenario.roadgraph_type, sch.ROAD_EDGE_TYPES) & scenario.roadgraph_valid
+    edge_xy = scenario.roadgraph_xyz[edges, :2].astype(np.float64)
+    edge_dir = scenario.roadgraph_dir[edges, :2].astype(np.float64)
+    want = np.zeros(scenario.num_objects, bool)
+    for index in range(scenario.num_objects):
+        if is_moving(scenario.x[index], scenario.y[index], settings):
+            xy = np.stack([scenario.x[index], scenario.y[index]], 1).astype(np.float64)
+            want[index] = _on_road(scenario, lanes, xy, cKDTree(edge_xy), edge_xy, edge_dir, settings).all()
+    want[scenario.sdc_index] = True
+    np.testing.assert_array_equal(got, want)
+    assert 1 < got.sum() < scenario.num_objects  # both labels occur
