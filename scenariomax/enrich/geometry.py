@@ -201,17 +201,18 @@ def project_to_polylines(points: np.ndarray, polylines: list[np.ndarray]) -> lis
     out: list = [None] * len(lines)
     for k in set(range(len(lines))) - set(batch):
         out[k] = project_to_polyline(pts, lines[k])[:2]
-    if not batch or len(pts) == 0 or not np.isfinite(pts).all() or \
-            not all(np.isfinite(lines[k]).all() for k in batch):
+    vertex = np.concatenate([lines[k] for k in batch]) if batch else np.zeros((0, 2))  # (V, 2)
+    if not batch or len(pts) == 0 or not np.isfinite(pts).all() or not np.isfinite(vertex).all():
         for k in batch:
             out[k] = project_to_polyline(pts, lines[k])[:2]
         return out
     num_seg = np.array([len(lines[k]) - 1 for k in batch])  # (L,) segments per polyline
-    vertex = np.concatenate([lines[k] for k in batch])  # (V, 2)
     v_start = run_starts(num_seg + 1)  # (L,) first vertex of each polyline
     s_start = run_starts(num_seg)  # (L,) first segment
     # Segments as project_to_polyline builds them, back to back (a polyline's last vertex starts none).
-    starts = np.delete(np.arange(len(vertex)), v_start + num_seg)  # (S,) start vertex of each segment
+    starts_segment = np.ones(len(vertex), bool)
+    starts_segment[v_start + num_seg] = False
+    starts = np.flatnonzero(starts_segment)  # (S,) start vertex of each segment
     ax, ay = vertex[starts, 0], vertex[starts, 1]
     sx, sy = vertex[starts + 1, 0] - ax, vertex[starts + 1, 1] - ay
     raw_len2 = sx * sx + sy * sy
