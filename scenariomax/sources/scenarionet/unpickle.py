@@ -101,7 +101,22 @@ ALLOWED_GLOBALS: dict[tuple[str, str], str] = {
 _FACTORY_NAMES = frozenset({"list", "dict", "int", "float", "str", "set", "tuple", "long", "unicode"})
 
 
+def _shown(value) -> str:
+    """A short one-line name of a value a (possibly corrupted) pickle handed us: a string's repr (its control
+    characters escaped) cut to 60 characters, a stand-in's own name, else the type's name (the repr of an
+    array or a dict would span many lines)."""
+    if isinstance(value, str):
+        text = repr(value)
+        return text if len(text) <= 60 else text[:56] + "...'"
+    if isinstance(value, (_Builtin, _DictClass, _EnumClass)):
+        return repr(value)
+    return f"a {type(value).__name__}"
+
+
 def _refuse(what: str) -> RefusedGlobalError:
+    # One line whatever a corrupted stream put into the names: control characters escaped, the length capped.
+    what = what.encode("unicode_escape").decode("ascii")
+    what = what if len(what) <= 200 else what[:197] + "..."
     return RefusedGlobalError(f"refused pickle global {what} (only plain containers and numpy arrays are allowed)")
 
 
@@ -216,7 +231,7 @@ def _checked_globals(charge: _Charges, unbuilt: dict[int, object]) -> dict[tuple
 
     def reconstruct(cls, shape, dtype):
         if cls is not _NDARRAY:
-            raise _refuse(f"_reconstruct of {cls!r}")
+            raise _refuse(f"_reconstruct of {_shown(cls)}")
         dtype = _small_dtype(dtype)
         charge(_shape_bytes(shape, dtype), "array")
         return new(_multiarray._reconstruct(np.ndarray, shape, dtype))
@@ -255,7 +270,7 @@ def _checked_globals(charge: _Charges, unbuilt: dict[int, object]) -> dict[tuple
             return collections.defaultdict()
         if isinstance(factory, _Builtin) and factory.name in _FACTORY_NAMES:
             return collections.defaultdict(factory.type)
-        raise _refuse(f"collections.defaultdict with factory {factory!r}")
+        raise _refuse(f"collections.defaultdict with factory {_shown(factory)}")
 
     def number_pair(real=0, imag=0):
         if not all(isinstance(v, (int, float)) for v in (real, imag)):
@@ -269,7 +284,7 @@ def _checked_globals(charge: _Charges, unbuilt: dict[int, object]) -> dict[tuple
 
     def latin1(text, encoding="latin1"):
         if not isinstance(text, str) or encoding not in ("latin1", "latin-1"):
-            raise _refuse(f"_codecs.encode with {encoding!r}")
+            raise _refuse(f"_codecs.encode with {_shown(encoding)}")
         charge(len(text), "bytes")
         return codecs.encode(text, "latin1")
 
@@ -513,7 +528,7 @@ def load_pickle(path: str | os.PathLike, limits: PickleLimits = SCENARIO_LIMITS)
     try:
         return loads_restricted(data, limits)
     except (RefusedGlobalError, PickleLimitError) as error:
-        raise InputError(f"{path}: {error}") from None
+        raise InputError(f"{path}: {' '.join(str(error).split())}") from None
     except RecursionError:
         raise InputError(f"{path}: not a readable pickle (nested too deeply)") from None
     except Exception as error:  # noqa: BLE001 - corrupted pickles raise many kinds of errors

@@ -179,3 +179,25 @@ def test_bytearray_length_is_checked_before_allocating():
     with pytest.raises(pickle.UnpicklingError, match="bytearray of"):
         loads_restricted(data)
     assert loads_restricted(pickle.dumps(bytearray(b"abc"), protocol=5)) == bytearray(b"abc")
+
+
+class ReconstructsFromAnArray:
+    """Pickles as numpy's `_reconstruct` called with an array where the ndarray class belongs (as a corrupted
+    stream can put any object there): the refusal must not print the array, whose repr spans many lines."""
+
+    def __reduce__(self):
+        reconstruct = np.zeros(1).__reduce__()[0]  # numpy._core (or numpy.core) .multiarray._reconstruct
+        return reconstruct, (np.zeros((40, 3)), (0,), b"b")
+
+
+def test_refusals_of_corrupted_names_and_arguments_stay_on_one_line(tmp_path):
+    # A global whose name holds a newline (a corrupted byte in the stream), and an array passed as a class.
+    name_with_newline = (b"\x80\x04\x8c\x13numpy._core.numeric\x94\x8c\x0c_frombuff\ner\x94\x93\x94.")
+    for data, shown in ((name_with_newline, "numpy._core.numeric._frombuff\\ner"),
+                        (pickle.dumps(ReconstructsFromAnArray(), protocol=4), "_reconstruct of a ndarray")):
+        path = tmp_path / "sd_corrupted.pkl"
+        path.write_bytes(data)
+        with pytest.raises(InputError) as caught:
+            load_pickle(path)
+        message = str(caught.value)
+        assert "\n" not in message and str(path) in message and shown in message, message
