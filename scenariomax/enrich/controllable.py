@@ -45,14 +45,7 @@ class ControllableStats:
 
 def is_moving(x: np.ndarray, y: np.ndarray, settings: ControllableSettings = ControllableSettings()) -> bool:
     """True unless the (fully valid) track looks parked. (T,), (T,) -> bool"""
-    xy = np.stack([x, y], 1).astype(np.float64)
-    travel = row_norm(xy - xy[0]).max(initial=0.0)  # row_norm: np.linalg.norm(axis=1)'s bits, fewer calls
-    window = STEPS_PER_SECOND
-    if len(xy) > window:
-        speed = row_norm(xy[window:] - xy[:-window]).max() * STEPS_PER_SECOND / window
-    else:
-        speed = 0.0
-    return bool(travel > settings.min_travel_m or speed > settings.min_speed_mps)
+    return bool(_moving_rows(np.asarray(x)[None], np.asarray(y)[None], settings)[0])
 
 
 def _on_road(scenario: Scenario, lanes: Lanes, xy: np.ndarray, edge_tree, edge_xy, edge_dir,
@@ -89,7 +82,8 @@ def controllable_mask(scenario: Scenario, lanes: Lanes,
 
 
 def _moving_rows(x: np.ndarray, y: np.ndarray, settings: ControllableSettings) -> np.ndarray:
-    """`is_moving` of every row at once, the same arithmetic. (k, T), (k, T) -> (k,) bool"""
+    """Whether each track moves: it gets further than `min_travel_m` from its start, or faster than
+    `min_speed_mps` over some one-second window; every row at once. (k, T), (k, T) -> (k,) bool"""
     xy = np.stack([x, y], -1).astype(np.float64)  # (k, T, 2)
     if len(xy) == 0:
         return np.zeros(0, bool)

@@ -93,33 +93,17 @@ def light_evidence(scenario: Scenario, stop: np.ndarray, direction: np.ndarray,
     """(green (T,) bool, red (T,) bool) evidence for a stop point and lane direction. `motion`: the scenario's
     `vehicle_motion`, when the caller has it (it is the same for every light)."""
     motion = vehicle_motion(scenario) if motion is None else motion
-    valid = motion.valid  # (N, T)
-    rel_x, rel_y = motion.x - stop[0], motion.y - stop[1]
-    along = rel_x * direction[0] + rel_y * direction[1]  # (N, T), > 0 past the stop point
-    lateral = np.abs(rel_x * direction[1] - rel_y * direction[0])
-    heading_cos = motion.cos_yaw * direction[0] + motion.sin_yaw * direction[1]
-    on_lane = valid & (lateral <= settings.lane_halfwidth_m) & (heading_cos > np.cos(np.pi / 4))
-    num_steps = scenario.num_timesteps
-    crossed = on_lane[:, 1:] & on_lane[:, :-1] & (along[:, :-1] < 0) & (along[:, 1:] >= 0)  # (N, T-1)
-    green = np.zeros(num_steps, bool)
-    for step in np.flatnonzero(crossed.any(axis=0)) + 1:
-        green[max(step - settings.green_window, 0):step + settings.green_window + 1] = True
-    speed = motion.speed
-    queued = (on_lane & (along < 0) & (along >= -settings.queue_distance_m)
-              & (speed < settings.stopped_speed_mps)).any(0)
-    dist = np.hypot(rel_x, rel_y)
-    crossing = (valid & (dist <= settings.cross_radius_m) & (speed > settings.cross_speed_mps)
-                & (np.abs(heading_cos) < 0.5))
-    red = queued & crossing.any(axis=0)
-    green, red = _fill_gaps(green, settings.max_gap_steps), _fill_gaps(red, settings.max_gap_steps)
-    conflict = green & red
-    return green & ~conflict, red & ~conflict
+    greens, reds = _evidence_of_lights(scenario.num_timesteps, np.asarray(stop, np.float64)[None, :2],
+                                       np.asarray(direction, np.float64)[None, :2], settings, motion)
+    return greens[0], reds[0]
 
 
 def _evidence_of_lights(num_steps: int, stops: np.ndarray, directions: np.ndarray, settings: LightSettings,
                         motion: Motion) -> tuple[np.ndarray, np.ndarray]:
-    """`light_evidence` of many lights at once (float64 stop points (L, 3) and directions (L, 2)): the same
-    arithmetic on (L, V, T) arrays instead of one numpy call sequence per light. -> green, red (L, T) bool"""
+    """The green and red evidence of many lights at once (float64 stop points (L, 2+) and lane directions (L, 2)),
+    on (L, V, T) arrays instead of one numpy call sequence per light. A light's green: some vehicle on its lane
+    crossed the stop point within `green_window` steps; red: a vehicle stands queued before it while another
+    crosses the junction; gaps filled, steps with both dropped. -> green, red (L, T) bool"""
     valid = motion.valid[None]  # (1, V, T)
     d0, d1 = directions[:, 0, None, None], directions[:, 1, None, None]  # (L, 1, 1)
     rel_x, rel_y = motion.x[None] - stops[:, 0, None, None], motion.y[None] - stops[:, 1, None, None]  # (L, V, T)

@@ -86,6 +86,41 @@ def test_light_without_lane_or_evidence_stays_unknown():
     assert not out.tl_inferred.any() and out.tl_valid[0].sum() == 1
 
 
+def _one_light_evidence(scenario, stop, direction, settings, motion):
+    """The evidence of one light, written step by step as before the lights were batched (the reference)."""
+    from scenariomax.enrich.traffic_lights import _fill_gaps
+
+    rel_x, rel_y = motion.x - stop[0], motion.y - stop[1]
+    along = rel_x * direction[0] + rel_y * direction[1]
+    lateral = np.abs(rel_x * direction[1] - rel_y * direction[0])
+    heading_cos = motion.cos_yaw * direction[0] + motion.sin_yaw * direction[1]
+    on_lane = motion.valid & (lateral <= settings.lane_halfwidth_m) & (heading_cos > np.cos(np.pi / 4))
+    crossed = on_lane[:, 1:] & on_lane[:, :-1] & (along[:, :-1] < 0) & (along[:, 1:] >= 0)
+    green = np.zeros(scenario.num_timesteps, bool)
+    for step in np.flatnonzero(crossed.any(axis=0)) + 1:
+        green[max(step - settings.green_window, 0):step + settings.green_window + 1] = True
+    queued = (on_lane & (along < 0) & (along >= -settings.queue_distance_m)
+              & (motion.speed < settings.stopped_speed_mps)).any(0)
+    crossing = (motion.valid & (np.hypot(rel_x, rel_y) <= settings.cross_radius_m)
+                & (motion.speed > settings.cross_speed_mps) & (np.abs(heading_cos) < 0.5))
+    red = queued & crossing.any(axis=0)
+    green, red = _fill_gaps(green, settings.max_gap_steps), _fill_gaps(red, settings.max_gap_steps)
+    return green & ~(green & red), red & ~(green & red)
+
+
+def _one_track_moves(x, y, settings):
+    """Whether one track moves, written as before the tracks were batched (the reference)."""
+    from scenariomax.enrich.controllable import STEPS_PER_SECOND
+
+    xy = np.stack([x, y], 1).astype(np.float64)
+    travel = np.linalg.norm(xy - xy[0], axis=1).max(initial=0.0)
+    window = STEPS_PER_SECOND
+    speed = 0.0
+    if len(xy) > window:
+        speed = np.linalg.norm(xy[window:] - xy[:-window], axis=1).max() * STEPS_PER_SECOND / window
+    return bool(travel > settings.min_travel_m or speed > settings.min_speed_mps)
+
+
 def test_light_evidence_reads_only_rows_that_can_count():
     """vehicle_motion keeps the vehicles valid at some step; the evidence is the one read from every object."""
     from scenariomax.enrich.traffic_lights import Motion, light_evidence, vehicle_motion
@@ -107,7 +142,7 @@ def test_light_evidence_reads_only_rows_that_can_count():
 
 def test_evidence_of_many_lights_is_each_lights_own():
     """with_inferred_lights reads the evidence of all its lights in one pass: the same as one light at a time."""
-    from scenariomax.enrich.traffic_lights import LightSettings, _evidence_of_lights, light_evidence, vehicle_motion
+    from scenariomax.enrich.traffic_lights import LightSettings, _evidence_of_lights, vehicle_motion
 
     scenario = _light_scene(logged_state=sch.TL_UNKNOWN)
     stops = np.array([[50.0, 0.0, 0.0], [60.0, -5.0, 1.0], [50.3, 0.2, 0.0], [-500.0, 0.0, 0.0]])
@@ -115,7 +150,7 @@ def test_evidence_of_many_lights_is_each_lights_own():
     settings = LightSettings(max_gap_steps=4)
     greens, reds = _evidence_of_lights(scenario.num_timesteps, stops, directions, settings, vehicle_motion(scenario))
     for stop, direction, green, red in zip(stops, directions, greens, reds):
-        want_green, want_red = light_evidence(scenario, stop, direction, settings)
+        want_green, want_red = _one_light_evidence(scenario, stop, direction, settings, vehicle_motion(scenario))
         np.testing.assert_array_equal(green, want_green)
         np.testing.assert_array_equal(red, want_red)
     assert greens[0].any() and reds[0].any() and greens[1].any() and not (greens[3].any() or reds[3].any())
@@ -133,7 +168,6 @@ def test_controllable_mask_of_all_vehicles_at_once_is_one_by_one():
         _moving_rows,
         _on_road,
         controllable_mask,
-        is_moving,
     )
     from scenariomax.enrich.lanes import extract_lanes
     from scenariomax.enrich.orientation import with_edges_oriented
@@ -149,13 +183,13 @@ def test_controllable_mask_of_all_vehicles_at_once_is_one_by_one():
     settings = ControllableSettings()
     got = controllable_mask(scenario, lanes, settings)
     np.testing.assert_array_equal(_moving_rows(scenario.x, scenario.y, settings),
-                                  [is_moving(x, y, settings) for x, y in zip(scenario.x, scenario.y)])
+                                  [_one_track_moves(x, y, settings) for x, y in zip(scenario.x, scenario.y)])
     edges = np.isin(scenario.roadgraph_type, sch.ROAD_EDGE_TYPES) & scenario.roadgraph_valid
     edge_xy = scenario.roadgraph_xyz[edges, :2].astype(np.float64)
     edge_dir = scenario.roadgraph_dir[edges, :2].astype(np.float64)
     want = np.zeros(scenario.num_objects, bool)
     for index in range(scenario.num_objects):
-        if is_moving(scenario.x[index], scenario.y[index], settings):
+        if _one_track_moves(scenario.x[index], scenario.y[index], settings):
             xy = np.stack([scenario.x[index], scenario.y[index]], 1).astype(np.float64)
             want[index] = _on_road(scenario, lanes, xy, cKDTree(edge_xy), edge_xy, edge_dir, settings).all()
     want[scenario.sdc_index] = True
