@@ -98,36 +98,62 @@ def light_evidence(scenario: Scenario, stop: np.ndarray, direction: np.ndarray,
     return greens[0], reds[0]
 
 
+def _near_pairs(stops: np.ndarray, motion: Motion, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """(light, vehicle) index pairs, sorted by light, of the vehicles whose valid positions' bounding box comes
+    within `reach` of the light's stop point. -> (P,), (P,)"""
+    valid = motion.valid
+    low_x = np.where(valid, motion.x, np.inf).min(axis=1)  # (V,)
+    high_x = np.where(valid, motion.x, -np.inf).max(axis=1)
+    low_y = np.where(valid, motion.y, np.inf).min(axis=1)
+    high_y = np.where(valid, motion.y, -np.inf).max(axis=1)
+    gap_x = np.maximum(np.maximum(low_x - stops[:, 0:1], stops[:, 0:1] - high_x), 0.0)  # (L, V)
+    gap_y = np.maximum(np.maximum(low_y - stops[:, 1:2], stops[:, 1:2] - high_y), 0.0)
+    return np.nonzero(gap_x * gap_x + gap_y * gap_y <= reach * reach)
+
+
 def _evidence_of_lights(num_steps: int, stops: np.ndarray, directions: np.ndarray, settings: LightSettings,
                         motion: Motion) -> tuple[np.ndarray, np.ndarray]:
     """The green and red evidence of many lights at once (float64 stop points (L, 2+) and lane directions (L, 2)),
-    on (L, V, T) arrays instead of one numpy call sequence per light. A light's green: some vehicle on its lane
-    crossed the stop point within `green_window` steps; red: a vehicle stands queued before it while another
-    crosses the junction; gaps filled, steps with both dropped. -> green, red (L, T) bool"""
-    valid = motion.valid[None]  # (1, V, T)
-    d0, d1 = directions[:, 0, None, None], directions[:, 1, None, None]  # (L, 1, 1)
-    rel_x, rel_y = motion.x[None] - stops[:, 0, None, None], motion.y[None] - stops[:, 1, None, None]  # (L, V, T)
+    on (light, vehicle) pairs instead of one numpy call sequence per light. A light's green: some vehicle on its
+    lane crossed the stop point within `green_window` steps; red: a vehicle stands queued before it while another
+    crosses the junction; gaps filled, steps with both dropped. -> green, red (L, T) bool
+
+    Only the vehicles that pass near a light can count for it: a crossing vehicle is within `cross_radius_m` of the
+    stop point, a queued one within the queue's diagonal, and one that crosses the stop line on the lane does so
+    between two of its positions within `lane_halfwidth_m` of the stop point, so their bounding box holds a point
+    that near. The pairs are those within the largest of these (+1 m against rounding): the same evidence."""
+    greens = np.zeros((len(stops), num_steps), bool)
+    reds = np.zeros((len(stops), num_steps), bool)
+    reach = max(settings.cross_radius_m, np.hypot(settings.queue_distance_m, settings.lane_halfwidth_m),
+                settings.lane_halfwidth_m) + 1.0
+    light, vehicle = _near_pairs(stops, motion, reach)  # (P,) each
+    if not len(light):
+        return greens, reds
+    valid = motion.valid[vehicle]  # (P, T)
+    d0, d1 = directions[light, 0, None], directions[light, 1, None]  # (P, 1)
+    rel_x, rel_y = motion.x[vehicle] - stops[light, 0, None], motion.y[vehicle] - stops[light, 1, None]  # (P, T)
     along = rel_x * d0 + rel_y * d1  # > 0 past the stop point
     lateral = np.abs(rel_x * d1 - rel_y * d0)
-    heading_cos = motion.cos_yaw[None] * d0 + motion.sin_yaw[None] * d1
+    heading_cos = motion.cos_yaw[vehicle] * d0 + motion.sin_yaw[vehicle] * d1
     on_lane = valid & (lateral <= settings.lane_halfwidth_m) & (heading_cos > np.cos(np.pi / 4))
-    crossed = (on_lane[:, :, 1:] & on_lane[:, :, :-1] & (along[:, :, :-1] < 0) & (along[:, :, 1:] >= 0)).any(axis=1)
-    speed = motion.speed[None]
-    queued = (on_lane & (along < 0) & (along >= -settings.queue_distance_m)
-              & (speed < settings.stopped_speed_mps)).any(axis=1)  # (L, T)
-    dist = np.hypot(rel_x, rel_y)
-    crossing = (valid & (dist <= settings.cross_radius_m) & (speed > settings.cross_speed_mps)
+    crossed = on_lane[:, 1:] & on_lane[:, :-1] & (along[:, :-1] < 0) & (along[:, 1:] >= 0)  # (P, T - 1)
+    speed = motion.speed[vehicle]
+    queued = on_lane & (along < 0) & (along >= -settings.queue_distance_m) & (speed < settings.stopped_speed_mps)
+    crossing = (valid & (np.hypot(rel_x, rel_y) <= settings.cross_radius_m) & (speed > settings.cross_speed_mps)
                 & (np.abs(heading_cos) < 0.5))
-    reds = queued & crossing.any(axis=1)  # (L, T)
-    greens = np.zeros((len(stops), num_steps), bool)
-    for light, crossed_light in enumerate(crossed):
-        green = greens[light]
+    # Per light: any of its vehicles (pairs sorted by light; each run of one light's pairs reduced at once).
+    lights, first = np.unique(light, return_index=True)  # (L',), (L',)
+    crossed_any = np.zeros((len(stops), num_steps - 1), bool)
+    crossed_any[lights] = np.logical_or.reduceat(crossed, first, axis=0)
+    reds[lights] = (np.logical_or.reduceat(queued, first, axis=0) & np.logical_or.reduceat(crossing, first, axis=0))
+    for row, crossed_light in zip(lights.tolist(), crossed_any[lights]):
+        green = greens[row]
         for step in np.flatnonzero(crossed_light) + 1:
             green[max(step - settings.green_window, 0):step + settings.green_window + 1] = True
-    for light in range(len(stops)):
-        green, red = _fill_gaps(greens[light], settings.max_gap_steps), _fill_gaps(reds[light], settings.max_gap_steps)
+    for row in lights.tolist():
+        green, red = _fill_gaps(greens[row], settings.max_gap_steps), _fill_gaps(reds[row], settings.max_gap_steps)
         conflict = green & red
-        greens[light], reds[light] = green & ~conflict, red & ~conflict
+        greens[row], reds[row] = green & ~conflict, red & ~conflict
     return greens, reds
 
 
