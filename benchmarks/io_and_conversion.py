@@ -85,6 +85,12 @@ def bench_source(dataset: str, src: Path, min_seconds: float = 6.0, min_passes: 
 
     if not src.exists():
         return {"skipped": f"{src} not found"}
+    try:  # as every conversion worker does (absent from trees before 2026-12-01)
+        from scenariomax._allocator import keep_freed_memory
+
+        keep_freed_memory()
+    except ImportError:
+        pass
     sizes = Sizes()
     transform, _ = make_transform(True)
 

@@ -31,6 +31,7 @@ from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
+from scenariomax._allocator import keep_freed_memory
 from scenariomax._lifeline import exit_with_parent, watch_process
 from scenariomax.codec import encode_scenario
 from scenariomax.enrich.budget import fit_to_budget
@@ -150,6 +151,7 @@ def prepare_scenario(scenario: Scenario, sizes: Sizes, transform: Transform | No
 
 def _iter_unit_records(source: Source, unit: str, sizes: Sizes, transform: Transform | None,
                        failures: list[Failure], notes: list[dict] | None = None) -> Iterator[bytes]:
+    keep_freed_memory()  # every engine's worker (and an in-process conversion) comes through here
     position = 0
     try:
         for item in source.read_unit(unit):
