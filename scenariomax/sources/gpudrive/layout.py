@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import operator
 from collections.abc import Mapping
 from pathlib import Path
 from typing import NoReturn
@@ -121,6 +122,7 @@ def headings_in_degrees(heading: np.ndarray, velocity: np.ndarray, valid: np.nda
 
 # --- fields -> arrays ------------------------------------------------------------------------------
 NO_Z = float("nan")  # a point written without z (2-D layouts)
+_XYZ, _XY = operator.itemgetter("x", "y", "z"), operator.itemgetter("x", "y")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -219,22 +221,26 @@ class _Fields:
     def points(self, value: object, where: str, names: tuple[str, ...]) -> np.ndarray:
         """A list of {x, y[, z]} objects. -> (k, len(names)) float64; an absent 'z' is NaN."""
         values = self.items(value, where)
-        try:  # the common layouts spelled out: a generator per point costs more than the parsing
+        try:  # the common layouts spelled out, read by itemgetter (C) where every point has every name
             if names == ("x", "y", "z"):
-                rows = [(p["x"], p["y"], p.get("z", NO_Z)) for p in values]
+                try:
+                    rows = list(map(_XYZ, values))
+                except KeyError:  # some point without z (2-D layouts)
+                    rows = [(p["x"], p["y"], p.get("z", NO_Z)) for p in values]
             elif names == ("x", "y"):
-                rows = [(p["x"], p["y"]) for p in values]
+                rows = list(map(_XY, values))
             else:
                 rows = [tuple(p[name] if name != "z" else p.get("z", NO_Z) for name in names) for p in values]
         except (TypeError, KeyError, AttributeError):
             bad = next((i for i, p in enumerate(values)
                         if not isinstance(p, Mapping) or "x" not in p or "y" not in p), 0)
             self.fail(f"{where}[{bad}]", "expected an object with numeric 'x' and 'y'")
-        if not {type(item) for row in rows for item in row} <= {int, float}:  # one pass; then find the culprit
+        flat = list(itertools.chain.from_iterable(rows))
+        if not set(map(type, flat)) <= {int, float}:  # one pass; then find the culprit
             for index, row in enumerate(rows):
                 if any(type(item) not in (int, float) for item in row):
                     self.fail(f"{where}[{index}]", "expected numeric coordinates")
-        return self._array(rows, where).reshape(len(rows), len(names))
+        return self._array(flat, where).reshape(len(rows), len(names))
 
     def flags(self, value: object, where: str) -> np.ndarray:
         """A list of booleans (0 / 1 accepted). -> (k,) bool"""
