@@ -37,7 +37,7 @@ from scenariomax.codec import encode_scenario
 from scenariomax.enrich.budget import fit_to_budget
 from scenariomax.errors import InputError, describe_os_error
 from scenariomax.io.gzip_members import COMPRESSIONS
-from scenariomax.io.tfrecord import TFRecordWriter, frame_for, iter_records
+from scenariomax.io.tfrecord import frame_for, write_framed
 from scenariomax.locks import LOCK_FILE, FolderBusyError, FolderLock
 from scenariomax.manifest import (
     MANIFEST,
@@ -85,12 +85,13 @@ class ConvertSettings:
 @dataclasses.dataclass(frozen=True)
 class UnitResult:
     unit: str
-    records_path: str | None  # file whose records are shard-ready frames (process engine)
+    records_path: str | None  # file of shard-ready frames back to back (process engine): `frame_for` of each record
     records: tuple[bytes, ...] | None  # in-memory shard-ready frames (ray engine): `frame_for` of each record
     num_records: int
     failures: tuple[Failure, ...]
     peak_rss_mib: float = 0.0  # the worker's peak resident memory so far (reported in the manifest)
     notes: tuple[dict, ...] = ()  # {"unit", "scenario", "notes"} of written scenarios that carry manifest notes
+    frame_sizes: tuple[int, ...] = ()  # bytes of each frame in `records_path`, in order
 
 
 @dataclasses.dataclass(frozen=True)
@@ -182,12 +183,15 @@ def convert_unit_to_file(source: Source, unit: str, work_dir: str, sizes: Sizes,
     failures: list[Failure] = []
     notes: list[dict] = []
     temp, final = (Path(work_dir) / name for name in unit_work_files(unit))
-    with TFRecordWriter(temp) as writer:
+    # The frames as the shard will hold them, back to back, and their sizes: the main process copies them over as
+    # they are (no second framing to strip, no CRC to check again). Not synced: a run never reads another's.
+    sizes_written: list[int] = []
+    with open(temp, "wb") as stream:
         for record in _iter_unit_records(source, unit, sizes, transform, failures, notes):
-            writer.write(frame_for(record, compression))
-        count = writer.num_records
+            sizes_written.append(write_framed(stream, record, compression))
     os.replace(temp, final)
-    return UnitResult(unit, str(final), None, count, tuple(failures), _peak_rss_mib(), tuple(notes))
+    return UnitResult(unit, str(final), None, len(sizes_written), tuple(failures), _peak_rss_mib(), tuple(notes),
+                      tuple(sizes_written))
 
 
 def unit_work_files(unit: str) -> tuple[str, str]:
@@ -351,7 +355,13 @@ class _ShardSink:
         if result.records is not None:
             yield from result.records
         elif result.records_path:
-            yield from iter_records(result.records_path)
+            with open(result.records_path, "rb") as stream:
+                for size in result.frame_sizes:
+                    frame = stream.read(size)
+                    if len(frame) < size:  # only if something else truncated our private file
+                        raise ConversionError(f"{result.records_path}: cut short while copying {result.unit} "
+                                              f"(disk trouble?); rerun with --resume to continue")
+                    yield frame
 
     def num_saved_records(self) -> int:
         return sum(state["saved_records"] for state in self.manifest["units"].values()) + sum(self.unsaved.values())

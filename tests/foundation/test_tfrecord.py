@@ -10,11 +10,13 @@ from scenariomax.io.tfrecord import (
     RecordError,
     TFRecordWriter,
     count_records,
+    frame_for,
     frame_record,
     iter_record_spans,
     iter_records,
     masked_crc32c,
     read_record_at,
+    write_framed,
 )
 
 
@@ -31,6 +33,18 @@ def test_frame_layout_is_length_crc_data_crc():
     assert struct.unpack("<I", framed[8:12])[0] == masked_crc32c(framed[:8])
     assert framed[12:15] == b"abc"
     assert struct.unpack("<I", framed[15:19])[0] == masked_crc32c(b"abc")
+
+
+@pytest.mark.parametrize("compression", ["none", "gzip"])
+def test_a_record_written_in_pieces_is_the_frame_readers_read(tmp_path, compression):
+    """Conversion workers write each frame as header, data, footer: the same bytes as `frame_for`, read back."""
+    payloads = [b"", b"abc", bytes(range(256)) * 40]
+    path = tmp_path / "pieces.tfrecord"
+    with open(path, "wb") as stream:
+        sizes = [write_framed(stream, data, compression) for data in payloads]
+    assert path.read_bytes() == b"".join(frame_for(data, compression) for data in payloads)
+    assert sizes == [len(frame_for(data, compression)) for data in payloads]
+    assert list(iter_records(path)) == payloads
 
 
 def test_write_then_read_many_records(tmp_path):
