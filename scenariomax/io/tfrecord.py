@@ -374,7 +374,7 @@ class TFRecordWriter:
 
     def write(self, data: bytes) -> None:
         assert self._stream is not None, "writer is closed"
-        self._stream.write(frame_for(data, self.compression, self.level))
+        write_framed(self._stream, data, self.compression, self.level)
         self.num_records += 1
 
     def write_frame(self, frame: bytes) -> None:
