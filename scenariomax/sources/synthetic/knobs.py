@@ -59,6 +59,11 @@ class SyntheticKnobs:
     # a stop sign, in a queue) when there are any: real logged SDCs stand for a third of their steps, the generator's
     # for a tenth, and a driver that cannot see the light learns what to do there only where it stands
     sdc_waits: float = 0.0
+    # chance that the SDC is chosen among the cars that stand (< 0.5 m/s) at every step from the current one on, when
+    # there are any (at the head of, or in, a queue at a long red): nuScenes scene-0553's logged SDC waits its whole
+    # 16 s while people and cars cross in front of it, and every other rule here picks a car that moves during the
+    # episode, so a student never saw an SDC whose log stands throughout. Drawn only when on
+    sdc_stands_through: float = 0.0
     # chance that a vehicle's driver crawls, wanting only SLOW_SPEED_FACTOR of the limit (a driver looking for a spot
     # or an address, a delivery van): the generator's drivers want 85-110% of the limit, so its slow leaders are
     # queues. Measured, the synthetic scenes do not lack slow leaders (benchmarks/crossing_traffic.py: real 3.7% of
@@ -107,6 +112,7 @@ class SyntheticKnobs:
         _check_range("walkers_per_crosswalk", self.walkers_per_crosswalk, 0.0, 12.0)
         _check_number("sdc_slow_start", self.sdc_slow_start, 0.0, 1.0)
         _check_number("sdc_waits", self.sdc_waits, 0.0, 1.0)
+        _check_number("sdc_stands_through", self.sdc_stands_through, 0.0, 1.0)
         _check_number("slow_vehicles", self.slow_vehicles, 0.0, 1.0)
         _check_range("sdc_length_m", self.sdc_length_m, 0.0, 8.0)
         _check_range("sdc_width_m", self.sdc_width_m, 0.0, 3.0)

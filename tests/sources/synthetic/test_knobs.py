@@ -303,6 +303,16 @@ def test_sdc_waits_chooses_sdcs_that_stand_for_seconds():
     assert (waiting >= WAIT_STEPS).mean() >= 0.5  # most scenes have one that waits 3 s (not every map has such a car)
 
 
+def test_sdc_stands_through_chooses_sdcs_that_never_move_in_the_episode():
+    def stand_through(chance):  # per scene: whether the SDC stays below walking pace at every step from the current one
+        knobs = SyntheticKnobs(sdc_stands_through=chance, topology_weights="intersection4:1,intersection3:1")
+        scenarios = [generate_scenario(9, i, SIZES, knobs=knobs) for i in range(20)]
+        return np.array([(s.speed[s.sdc_index, s.current_time_index:] < STANDING_MPS).all() for s in scenarios])
+
+    assert not stand_through(0.0).any()  # every other rule picks a car that moves
+    assert stand_through(1.0).mean() >= 0.3  # at junctions, a car waits through the episode in most maps
+
+
 def test_slow_vehicles_puts_crawling_leaders_on_the_road():
     def crawlers(chance):  # per scene: moving vehicles (not the SDC) whose fastest logged speed stays under 4.5 m/s
         counts = []
@@ -385,6 +395,7 @@ def test_driver_style_spread_widens_the_traits_around_their_centres():
     ({"parked_reach": (0.0, 2.5)}, "parked_reach"),
     ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"),
     ({"sdc_slow_start": -0.1}, "sdc_slow_start"), ({"sdc_waits": 1.5}, "sdc_waits"),
+    ({"sdc_stands_through": 2.0}, "sdc_stands_through"),
     ({"slow_vehicles": 2.0}, "slow_vehicles"), ({"sdc_width_m": 3.5}, "sdc_width_m"),
     ({"sdc_length_m": -1.0}, "sdc_length_m"), ({"street_objects": (5.0, 2.0)}, "street_objects"),
 ])
