@@ -121,11 +121,11 @@ def _evidence_of_lights(num_steps: int, stops: np.ndarray, directions: np.ndarra
     Only the vehicles that pass near a light can count for it: a crossing vehicle is within `cross_radius_m` of the
     stop point, a queued one within the queue's diagonal, and one that crosses the stop line on the lane does so
     between two of its positions within `lane_halfwidth_m` of the stop point, so their bounding box holds a point
-    that near. The pairs are those within the largest of these (+1 m against rounding): the same evidence."""
+    that near (a lane half-width is less than the queue's diagonal). The pairs are those within the larger of the
+    cross radius and the queue's diagonal (+1 m against rounding): the same evidence."""
     greens = np.zeros((len(stops), num_steps), bool)
     reds = np.zeros((len(stops), num_steps), bool)
-    reach = max(settings.cross_radius_m, np.hypot(settings.queue_distance_m, settings.lane_halfwidth_m),
-                settings.lane_halfwidth_m) + 1.0
+    reach = max(settings.cross_radius_m, np.hypot(settings.queue_distance_m, settings.lane_halfwidth_m)) + 1.0
     light, vehicle = _near_pairs(stops, motion, reach)  # (P,) each
     if not len(light):
         return greens, reds
@@ -150,8 +150,7 @@ def _evidence_of_lights(num_steps: int, stops: np.ndarray, directions: np.ndarra
         green = greens[row]
         for step in np.flatnonzero(crossed_light) + 1:
             green[max(step - settings.green_window, 0):step + settings.green_window + 1] = True
-    for row in lights.tolist():
-        green, red = _fill_gaps(greens[row], settings.max_gap_steps), _fill_gaps(reds[row], settings.max_gap_steps)
+        green, red = _fill_gaps(green, settings.max_gap_steps), _fill_gaps(reds[row], settings.max_gap_steps)
         conflict = green & red
         greens[row], reds[row] = green & ~conflict, red & ~conflict
     return greens, reds
