@@ -2,9 +2,9 @@
 
 A scenario's conversion allocates and frees arrays and records of 0.1-3 MB by the hundred. glibc serves blocks of
 that size with fresh mmap'd pages (or trims the heap top once 128 KB lie free), so every scenario pays the page
-faults of zero-filling its memory again: ~7% of a WOMD conversion on the 2-core VM (docs/benchmarks.md). With the
-mmap threshold raised to its ceiling and trimming from 64 MB on, the heap keeps those blocks (a worker holds at most
-64 MB more between scenarios). Linux with glibc only; elsewhere (musl, macOS, Windows) nothing changes.
+faults of zero-filling its memory again: 3-7% of a fresh worker's WOMD conversion on the 2-core VM (session 56).
+With the mmap threshold raised to its ceiling and trimming from 64 MB on, the heap keeps those blocks (a worker holds
+at most 64 MB more between scenarios). Linux with glibc only; elsewhere (musl, macOS, Windows) nothing changes.
 """
 
 from __future__ import annotations

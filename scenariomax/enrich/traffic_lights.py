@@ -143,10 +143,8 @@ def _evidence_of_lights(num_steps: int, stops: np.ndarray, directions: np.ndarra
                 & (np.abs(heading_cos) < 0.5))
     # Per light: any of its vehicles (pairs sorted by light; each run of one light's pairs reduced at once).
     lights, first = np.unique(light, return_index=True)  # (L',), (L',)
-    crossed_any = np.zeros((len(stops), num_steps - 1), bool)
-    crossed_any[lights] = np.logical_or.reduceat(crossed, first, axis=0)
     reds[lights] = (np.logical_or.reduceat(queued, first, axis=0) & np.logical_or.reduceat(crossing, first, axis=0))
-    for row, crossed_light in zip(lights.tolist(), crossed_any[lights]):
+    for row, crossed_light in zip(lights.tolist(), np.logical_or.reduceat(crossed, first, axis=0)):  # (T - 1,) each
         green = greens[row]
         for step in np.flatnonzero(crossed_light) + 1:
             green[max(step - settings.green_window, 0):step + settings.green_window + 1] = True

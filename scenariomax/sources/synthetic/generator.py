@@ -72,12 +72,13 @@ def _choose_sdc(network: RoadNetwork, traffic: Traffic, rng: np.random.Generator
     that stands for 3 s or more of the episode (at a light, a stop, in a queue); with the `sdc_stands_through` knob's,
     one that stands at every step from the current one on (it never moves in the episode), before all of these."""
     is_car = (traffic.object_type == OBJECT_TYPE_VEHICLE) & ~traffic.is_parked & (traffic.length < 5.5)
+    always_valid = is_car & traffic.valid.all(axis=1)
     if knobs.sdc_stands_through > 0 and rng.random() < knobs.sdc_stands_through:
         standing = (traffic.speed[:, sizes.current_time_index:] < STANDING_MPS).all(axis=1)
-        waiting = np.flatnonzero(is_car & traffic.valid.all(axis=1) & standing)
+        waiting = np.flatnonzero(always_valid & standing)
         if len(waiting):
             return int(waiting[int(rng.integers(len(waiting)))])
-    candidates = np.flatnonzero(is_car & traffic.valid.all(axis=1) & (traffic.speed.max(axis=1) > 3.0))
+    candidates = np.flatnonzero(always_valid & (traffic.speed.max(axis=1) > 3.0))
     if len(candidates) == 0:
         return None
     light_times = np.arange(sizes.num_timesteps) * DT_S
