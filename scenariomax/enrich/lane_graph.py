@@ -117,23 +117,27 @@ def _neighbor_pairs(lanes: Lanes, edge_xy: np.ndarray, settings: LaneGraphSettin
     num_neighbors = min(32, len(samples))
     dist, idx = tree.query(sample_xy, k=num_neighbors, distance_upper_bound=settings.neighbor_max_m + 1.0)
     dist, idx = np.atleast_2d(dist), np.atleast_2d(idx)
-    rows, cols = np.nonzero(np.isfinite(dist))
-    other = idx[rows, cols]
+    found = np.flatnonzero(np.isfinite(dist))  # row-major, as np.nonzero's (row, column) pairs
+    rows, other = found // dist.shape[1], idx.ravel()[found]
     keep = sample_lane[other] != sample_lane[rows]
     rows, other = rows[keep], other[keep]
     # Exact lateral distance to the other lane: project onto the other sample's tangent line.
     offset = sample_xy[other] - sample_xy[rows]
-    lateral = np.abs(offset[:, 0] * sample_dir[other, 1] - offset[:, 1] * sample_dir[other, 0])
-    along = np.abs((offset * sample_dir[other]).sum(-1))
-    cos_heading = (sample_dir[rows] * sample_dir[other]).sum(-1)
+    other_dir = sample_dir[other]  # gathered once: the three tests below read it
+    lateral = np.abs(offset[:, 0] * other_dir[:, 1] - offset[:, 1] * other_dir[:, 0])
+    along = np.abs((offset * other_dir).sum(-1))
+    cos_heading = (sample_dir[rows] * other_dir).sum(-1)
     ok = ((lateral >= settings.neighbor_min_m) & (lateral <= settings.neighbor_max_m)
           & (along <= settings.neighbor_sample_spacing_m)
           & (cos_heading > np.cos(np.radians(settings.neighbor_heading_deg))))
     rows, other, offset = rows[ok], other[ok], offset[ok]
     if len(edge_xy) and len(rows):
         midpoints = sample_xy[rows] + 0.5 * offset
-        clearance, _ = edge_tree(lanes, edge_xy).query(midpoints, k=1)
-        clear = clearance > settings.edge_clearance_m
+        # Clear: no edge point within edge_clearance_m. The search stops at the clearance (an edge point at exactly
+        # that distance is found: the bound is the next float up), not at each midpoint's nearest edge point.
+        bound = np.nextafter(settings.edge_clearance_m, np.inf)
+        clearance, _ = edge_tree(lanes, edge_xy).query(midpoints, k=1, distance_upper_bound=bound)
+        clear = np.isinf(clearance)
         rows, other, offset = rows[clear], other[clear], offset[clear]
     side = np.sign(sample_dir[rows, 0] * offset[:, 1] - sample_dir[rows, 1] * offset[:, 0])  # + left
     lane_a, lane_b = sample_lane[rows], sample_lane[other]
