@@ -6,6 +6,7 @@ import numpy as np
 
 from scenariomax import schema as sch
 from scenariomax.enrich import extract_lanes, lane_graph_to_arrays, rebuild_lane_graph, scenario_lane_graph
+from scenariomax.enrich.lane_graph import LaneGraphSettings
 from scenariomax.enrich.roadgraph import LaneLinks, MapPolyline, lane_graph_arrays
 from tests.enrich.scenes import line, make_scenario, straight_xy, track
 
@@ -50,6 +51,20 @@ def test_parallel_lanes_are_left_and_right_neighbours_unless_an_edge_separates_t
     arrays = lane_graph_to_arrays(lanes, graph, num_lane_links=4)
     row = list(arrays["lane_id"]).index(1)
     assert list(arrays["lane_left_neighbors"][row]) == [2, -1, -1, -1]
+
+
+def test_an_edge_exactly_at_the_clearance_from_the_lanes_midline_still_separates_them():
+    def neighbours(edge_y):  # lanes at y = 0 and 3.5 (midline 1.75), a road edge along y = edge_y, same x points
+        polylines = [MapPolyline(1, LANE, line((0, 0), (98, 0))), MapPolyline(2, LANE, line((0, 3.5), (98, 3.5))),
+                     MapPolyline(9, sch.RG_ROAD_EDGE_BOUNDARY, line((0, edge_y), (98, edge_y)))]
+        scenario = make_scenario(polylines, [track(straight_xy(0, 5))])
+        lanes = extract_lanes(scenario)
+        graph, _ = scenario_lane_graph(scenario, lanes)
+        return _ids(lanes, graph.left[lanes.index_of[1]])
+
+    clearance = LaneGraphSettings().edge_clearance_m
+    assert neighbours(1.75 + clearance) == []  # exactly at the clearance: not clear of the edge
+    assert neighbours(1.75 + clearance + 0.05) == [2]
 
 
 def test_explicit_links_win_over_geometry():
