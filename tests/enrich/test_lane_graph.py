@@ -5,8 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from scenariomax import schema as sch
-from scenariomax.enrich import extract_lanes, lane_graph_to_arrays, rebuild_lane_graph, scenario_lane_graph
-from scenariomax.enrich.lane_graph import LaneGraphSettings
+from scenariomax.enrich import (
+    LaneGraphSettings,
+    extract_lanes,
+    lane_graph_to_arrays,
+    rebuild_lane_graph,
+    scenario_lane_graph,
+)
 from scenariomax.enrich.roadgraph import LaneLinks, MapPolyline, lane_graph_arrays
 from tests.enrich.scenes import line, make_scenario, straight_xy, track
 
