@@ -15,9 +15,10 @@ from vmax_sim.observation import (
     NoiseConfig,
     ObservationConfig,
     ObservationInputs,
+    object_feature_count,
     observe,
 )
-from vmax_sim.observation.features import compact
+from vmax_sim.observation.features import compact, route_frame
 
 K = 5
 
@@ -242,3 +243,38 @@ def test_route_selection_keeps_the_car_ahead_that_parked_cars_push_out(index):
     assert as_set[0] == as_set[1] and len(as_set[0]) == 6
     with pytest.raises(ValueError, match="object_selection"):
         ObservationConfig(object_selection="closest")
+
+
+def test_object_route_frame_reads_a_car_on_a_bend_as_in_the_way_and_one_beside_it_as_not():
+    # the route turns left: 5 m straight ahead, then up +y (targets every 5 m, SDC frame, normalised by 50 m)
+    config = ObservationConfig()
+    route_m = np.array([[5, 0], [5, 5], [5, 10], [5, 15]] + [[0, 0]] * 6, np.float32)
+    valid = np.array([True] * 4 + [False] * 6)
+    targets = jnp.asarray(route_m / config.max_distance)
+    points = jnp.asarray([[5.0, 12.0],  # on the route after the bend: in the way, 17 m along it
+                          [15.0, 12.0],  # straight ahead of the SDC, 10 m right of the route
+                          [-8.0, 0.0],  # behind the SDC, on the line of its first segment
+                          [5.0, 30.0],  # beyond the route's last target, on its line
+                          [5.0, 5.0]])
+    along, across = route_frame(points, targets, jnp.asarray(valid), config)
+    np.testing.assert_allclose(along, [17.0, 17.0, -8.0, 35.0, 10.0], atol=1e-4)
+    np.testing.assert_allclose(across, [0.0, -10.0, 0.0, 0.0, 0.0], atol=1e-4)
+    # no route: the SDC's heading is the route
+    along, across = route_frame(points, targets, jnp.zeros(10, bool), config)
+    np.testing.assert_allclose(along, points[:, 0], atol=1e-4)
+    np.testing.assert_allclose(across, points[:, 1], atol=1e-4)
+
+
+def test_object_route_frame_adds_two_columns_per_object_step_and_changes_nothing_else(index):
+    inputs = obs_inputs(objects=[(20.0, 0.0, 0.0, 5.0), (10.0, 3.5, 0.0, 0.0)])
+    plain = OBSERVE(index, inputs, ObservationConfig(num_objects=4))
+    framed = OBSERVE(index, inputs, ObservationConfig(num_objects=4, object_route_frame=True))
+    assert framed.objects.shape == plain.objects.shape[:-1] + (OBJECT_FEATURES + 2,)
+    assert object_feature_count(ObservationConfig(object_route_frame=True)) == OBJECT_FEATURES + 2
+    np.testing.assert_array_equal(framed.objects[..., :OBJECT_FEATURES], plain.objects)
+    np.testing.assert_array_equal(framed.objects_valid, plain.objects_valid)
+    np.testing.assert_array_equal(framed.path_targets, plain.path_targets)
+    # the route runs along +x: nearest first, 10 m ahead one lane (3.5 m) to its left, 20 m ahead on it
+    np.testing.assert_allclose(framed.objects[:2, -1, OBJECT_FEATURES:], [[10 / 50, 3.5 / 5], [20 / 50, 0.0]],
+                               atol=1e-5)
+    assert np.all(np.asarray(framed.objects[2:]) == 0)

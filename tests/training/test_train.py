@@ -174,15 +174,17 @@ def test_kill_9_then_resume_continues_the_curve(synthetic_shards, tmp_path):
 
 
 @pytest.mark.slow  # ~40 s on 2 cores
-def test_a_run_that_sees_the_sdc_size_trains_and_its_policy_loads_for_evaluation(synthetic_shards, tmp_path):
+def test_a_run_that_sees_the_sdc_size_and_objects_along_its_route_trains_and_its_policy_loads_for_evaluation(
+        synthetic_shards, tmp_path):
     from vmax_sim.training.run_policy import evaluate_run, load_trained_policy
 
-    config = tiny_config(synthetic_shards, "bc", "obs.sdc_size=true", "train.total_env_steps=40",
-                         "train.chunk_steps=2")
+    config = tiny_config(synthetic_shards, "bc", "obs.sdc_size=true", "obs.object_route_frame=true",
+                         "train.total_env_steps=40", "train.chunk_steps=2")
     train(config, tmp_path / "sized", progress=False, print_fn=lambda line: None)
     loaded = load_trained_policy(tmp_path / "sized")
-    assert loaded.config.obs.sdc_size
+    assert loaded.config.obs.sdc_size and loaded.config.obs.object_route_frame
     kernels = [leaf.shape for leaf in jax.tree.leaves(loaded.params) if getattr(leaf, "ndim", 0) == 2]
     assert (2 * 9, 16) in kernels  # the SDC token: 2 steps of 6 + 2 size columns + a mask, into embed_dim 16
+    assert (2 * 15, 16) in kernels  # an object token: 2 steps of 12 + 2 route columns + a mask
     evaluated = evaluate_run(tmp_path / "sized", str(synthetic_shards), num_scenarios=4, batch_size=4)
     assert evaluated.summary["num_episodes"] == 4

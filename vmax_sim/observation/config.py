@@ -66,6 +66,9 @@ class ObservationConfig:
     # 4.1 x 1.7 m (nuScenes) to 5.3 x 2.3 m (the Waymo car); a student that cannot see its size keeps the margins of
     # the cars it trained in (docs/learning.md, session 48)
     sdc_size: bool = False
+    # two more columns per object step: how far along the SDC's route ahead it is and how far across it
+    # (`features.route_frame`); the per-object MLP then reads whether an object is in the SDC's way on a bend
+    object_route_frame: bool = False
     max_distance: float = 50.0  # m, positions are divided by it
     max_speed: float = 30.0  # m/s, velocities and speed limits are divided by it
     max_size: float = 10.0  # m, box sizes are divided by it

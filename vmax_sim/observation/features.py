@@ -28,11 +28,19 @@ ROADGRAPH_FEATURES = 5 + 3  # x, y, dir x, dir y, speed limit, edge / lane / lin
 LIGHT_STATES = ("red", "yellow", "green", "unknown")  # the order of the lights' state one-hot
 LIGHT_FEATURES = 2 + len(LIGHT_STATES)  # x, y, state one-hot
 SDC_FEATURES = 6  # x, y, vx, vy, cos, sin; + length, width with `ObservationConfig.sdc_size`
+ROUTE_FRAME_FEATURES = 2  # along the SDC's route, across it (`ObservationConfig.object_route_frame`)
+ROUTE_ACROSS_SCALE = 5.0  # m; offsets across the route are divided by it (a lane is ~3.5 m wide)...
+ROUTE_ACROSS_CLIP = 4.0  # ...and clipped to +-4 (20 m): further off, only "far off the route" matters
 
 
 def sdc_feature_count(config: ObservationConfig) -> int:
     """The width of `Observation.sdc`'s last axis under `config`."""
     return SDC_FEATURES + (2 if config.sdc_size else 0)
+
+
+def object_feature_count(config: ObservationConfig) -> int:
+    """The width of `Observation.objects`' last axis under `config`."""
+    return OBJECT_FEATURES + (ROUTE_FRAME_FEATURES if config.object_route_frame else 0)
 
 
 @flax.struct.dataclass
@@ -64,7 +72,7 @@ class Observation:
     # (k, sdc_feature_count) float32, SDC history: x, y, vx, vy, cos, sin (SDC frame, normalised) [, length, width]
     sdc: jnp.ndarray
     sdc_valid: jnp.ndarray  # (k,) bool
-    objects: jnp.ndarray  # (n, k, OBJECT_FEATURES) float32
+    objects: jnp.ndarray  # (n, k, object_feature_count) float32
     objects_valid: jnp.ndarray  # (n, k) bool
     roadgraph: jnp.ndarray  # (m, ROADGRAPH_FEATURES) float32
     roadgraph_valid: jnp.ndarray  # (m,) bool
@@ -118,8 +126,10 @@ def route_first_objects(inputs: ObservationInputs, targets: jnp.ndarray, targets
 
 
 def object_features(inputs: ObservationInputs, indices: jnp.ndarray, index_valid: jnp.ndarray,
-                    config: ObservationConfig):
-    """(n, k, OBJECT_FEATURES) features and (n, k) validity of the chosen objects."""
+                    config: ObservationConfig, targets: jnp.ndarray | None = None,
+                    targets_valid: jnp.ndarray | None = None):
+    """(n, k, object_feature_count) features and (n, k) validity of the chosen objects; with
+    `config.object_route_frame`, `targets` / `targets_valid` (the path targets) give the route they are read along."""
     origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
     xy, vel, yaw = inputs.object_xy[indices], inputs.object_vel[indices], inputs.object_yaw[indices]
     valid = inputs.object_valid[indices] & index_valid[:, None]
@@ -127,8 +137,46 @@ def object_features(inputs: ObservationInputs, indices: jnp.ndarray, index_valid
     size = jnp.broadcast_to(inputs.object_size[indices][:, None] / config.max_size, xy.shape)
     one_hot = jax.nn.one_hot(inputs.object_type[indices] - 1, NUM_OBJECT_TYPES)
     one_hot = jnp.broadcast_to(one_hot[:, None], xy.shape[:2] + (NUM_OBJECT_TYPES,))
-    feats = jnp.concatenate([motion, size, one_hot], -1)
+    parts = [motion, size, one_hot]
+    if config.object_route_frame:
+        along, across = route_frame(motion[..., :2] * config.max_distance, targets, targets_valid, config)
+        parts.append(jnp.stack([along / config.max_distance,
+                                jnp.clip(across / ROUTE_ACROSS_SCALE, -ROUTE_ACROSS_CLIP, ROUTE_ACROSS_CLIP)], -1))
+    feats = jnp.concatenate(parts, -1)
     return jnp.where(valid[..., None], feats, 0.0), valid
+
+
+def route_frame(local: jnp.ndarray, targets: jnp.ndarray, targets_valid: jnp.ndarray,
+                config: ObservationConfig) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Where points lie along the SDC's route ahead (the polyline from the SDC through its path targets) and across
+    it: the per-object MLP cannot tell from x, y alone whether a car on a bend or across a junction is in the SDC's
+    way, which its teacher reads along the route. The first segment reaches back behind the SDC and the last valid
+    one on past the route's end; with no target, the route is the SDC's heading.
+
+    local (..., 2) SDC-frame m; targets (T, 2) normalised, targets_valid (T,) -> along (...,) m, across (...,) m
+    (left of the route > 0).
+    """
+    heading = jnp.array([config.path_target_spacing, 0.0])
+    first = jnp.where(targets_valid[0], targets[0] * config.max_distance, heading)
+    points = jnp.concatenate([jnp.zeros((1, 2)), first[None], targets[1:] * config.max_distance])  # (T + 1, 2)
+    seg_valid = jnp.concatenate([jnp.ones(1, bool), targets_valid[:-1] & targets_valid[1:]])  # (T,)
+    start, seg = points[:-1], points[1:] - points[:-1]  # (T, 2)
+    length = jnp.maximum(vector_length(seg), 1e-6)  # (T,)
+    rel = local[..., None, :] - start  # (..., T, 2)
+    t = jnp.sum(rel * seg, -1) / jnp.square(length)  # (..., T)
+    index = jnp.arange(seg_valid.shape[0])
+    last = jnp.max(jnp.where(seg_valid, index, 0))
+    t = jnp.clip(t, jnp.where(index == 0, -jnp.inf, 0.0), jnp.where(index == last, jnp.inf, 1.0))
+    gap = jnp.where(seg_valid, vector_length(rel - t[..., None] * seg), jnp.inf)  # (..., T)
+    nearest = jnp.argmin(gap, -1)[..., None]  # (..., 1)
+    start_arc = jnp.cumsum(length) - length  # (T,) m along the route at each segment's start
+
+    def pick(a):  # (..., T) -> (...,)
+        return jnp.take_along_axis(a, nearest, -1)[..., 0]
+
+    along = pick(start_arc + t * length)
+    across = pick((seg[..., 0] * rel[..., 1] - seg[..., 1] * rel[..., 0]) / length)
+    return along, across
 
 
 def compact(valid: jnp.ndarray, num: int) -> tuple[jnp.ndarray, jnp.ndarray]:
@@ -283,7 +331,7 @@ def observe(map_index: MapIndex, inputs: ObservationInputs, config: ObservationC
     if key is not None and noise.on_objects:
         inputs, visible = apply_noise(key, inputs, indices, index_valid, config)
         index_valid = index_valid & visible
-    objects, objects_valid = object_features(inputs, indices, index_valid, config)
+    objects, objects_valid = object_features(inputs, indices, index_valid, config, targets, targets_valid)
     origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
     sdc = _heading_features(inputs.sdc_xy, inputs.sdc_vel, inputs.sdc_yaw, origin, origin_yaw, config)
     if config.sdc_size:  # the car's own box, so one student can keep the margins of cars of every size

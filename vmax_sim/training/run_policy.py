@@ -22,9 +22,9 @@ from vmax_sim.evaluation.trained import trained_policy
 from vmax_sim.map_index.structure import MapIndexConfig
 from vmax_sim.observation import (
     LIGHT_FEATURES,
-    OBJECT_FEATURES,
     ROADGRAPH_FEATURES,
     Observation,
+    object_feature_count,
     sdc_feature_count,
 )
 from vmax_sim.policies.base import Policy
@@ -82,7 +82,7 @@ def _example_observation(config, env):
     zeros = jnp.zeros
     return Observation(
         sdc=zeros((1, k, sdc_feature_count(obs))), sdc_valid=zeros((1, k), bool),
-        objects=zeros((1, n, k, OBJECT_FEATURES)),
+        objects=zeros((1, n, k, object_feature_count(obs))),
         objects_valid=zeros((1, n, k), bool), roadgraph=zeros((1, points, ROADGRAPH_FEATURES)),
         roadgraph_valid=zeros((1, points), bool), lights=zeros((1, obs.num_lights, LIGHT_FEATURES)),
         lights_valid=zeros((1, obs.num_lights), bool), path_targets=zeros((1, obs.num_path_targets, 2)),
