@@ -15,7 +15,7 @@ from scenariomax.schema import (
 )
 from vmax_sim.geometry.boxes import boxes_overlap
 from vmax_sim.geometry.reductions import argmin_packed
-from vmax_sim.geometry.segments import point_segment_distance
+from vmax_sim.geometry.segments import point_segment_distance, side_of_segment
 from vmax_sim.geometry.transforms import to_local_points, to_local_vectors, vector_length
 from vmax_sim.map_index.query import PathProjection, observation_points, project_on_paths
 from vmax_sim.map_index.structure import MapIndex
@@ -139,7 +139,7 @@ def object_features(inputs: ObservationInputs, indices: jnp.ndarray, index_valid
     one_hot = jnp.broadcast_to(one_hot[:, None], xy.shape[:2] + (NUM_OBJECT_TYPES,))
     parts = [motion, size, one_hot]
     if config.object_route_frame:
-        along, across = route_frame(motion[..., :2] * config.max_distance, targets, targets_valid, config)
+        along, across = route_frame(to_local_points(xy, origin, origin_yaw), targets, targets_valid, config)
         parts.append(jnp.stack([along / config.max_distance,
                                 jnp.clip(across / ROUTE_ACROSS_SCALE, -ROUTE_ACROSS_CLIP, ROUTE_ACROSS_CLIP)], -1))
     feats = jnp.concatenate(parts, -1)
@@ -175,7 +175,7 @@ def route_frame(local: jnp.ndarray, targets: jnp.ndarray, targets_valid: jnp.nda
         return jnp.take_along_axis(a, nearest, -1)[..., 0]
 
     along = pick(start_arc + t * length)
-    across = pick((seg[..., 0] * rel[..., 1] - seg[..., 1] * rel[..., 0]) / length)
+    across = pick(side_of_segment(local[..., None, :], start, points[1:]) / length)
     return along, across
 
 
