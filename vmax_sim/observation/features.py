@@ -115,14 +115,23 @@ def route_first_objects(inputs: ObservationInputs, targets: jnp.ndarray, targets
     """
     origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
     local = to_local_points(inputs.object_xy[:, -1], origin, origin_yaw)  # (N, 2) m
-    points = jnp.concatenate([jnp.zeros((1, 2)), targets * config.max_distance])  # (T + 1, 2) m, SDC first
-    seg_valid = jnp.concatenate([targets_valid[:1], targets_valid[:-1] & targets_valid[1:]])  # (T,)
+    points, seg_valid = route_polyline(targets, targets_valid, config)
     to_route = point_segment_distance(local[:, None], points[None, :-1], points[None, 1:])  # (N, T)
     on_route = jnp.any((to_route <= config.route_corridor_m) & seg_valid[None], axis=1)  # (N,)
     dist = vector_length(local)
     valid = inputs.object_valid[:, -1]
     # on-route objects rank before every other (distances are far below the offset); invalid ones last
     return lowest_ranked(jnp.where(valid, dist - jnp.where(on_route, 1e6, 0.0), jnp.inf), config.num_objects)
+
+
+def route_polyline(targets: jnp.ndarray, targets_valid: jnp.ndarray,
+                   config: ObservationConfig) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """The SDC's route ahead as a polyline from the SDC (the origin) through its path targets.
+
+    targets (T, 2) SDC-frame normalised, targets_valid (T,) -> points (T + 1, 2) m, segment valid (T,).
+    """
+    points = jnp.concatenate([jnp.zeros((1, 2)), targets * config.max_distance])
+    return points, jnp.concatenate([targets_valid[:1], targets_valid[:-1] & targets_valid[1:]])
 
 
 def object_features(inputs: ObservationInputs, indices: jnp.ndarray, index_valid: jnp.ndarray,
@@ -156,10 +165,10 @@ def route_frame(local: jnp.ndarray, targets: jnp.ndarray, targets_valid: jnp.nda
     local (..., 2) SDC-frame m; targets (T, 2) normalised, targets_valid (T,) -> along (...,) m, across (...,) m
     (left of the route > 0).
     """
-    heading = jnp.array([config.path_target_spacing, 0.0])
-    first = jnp.where(targets_valid[0], targets[0] * config.max_distance, heading)
-    points = jnp.concatenate([jnp.zeros((1, 2)), first[None], targets[1:] * config.max_distance])  # (T + 1, 2)
-    seg_valid = jnp.concatenate([jnp.ones(1, bool), targets_valid[:-1] & targets_valid[1:]])  # (T,)
+    points, seg_valid = route_polyline(targets, targets_valid, config)  # (T + 1, 2), (T,)
+    heading = jnp.array([config.path_target_spacing, 0.0])  # no first target: the first segment along the heading
+    points = points.at[1].set(jnp.where(targets_valid[0], points[1], heading))
+    seg_valid = seg_valid.at[0].set(True)
     start, seg = points[:-1], points[1:] - points[:-1]  # (T, 2)
     length = jnp.maximum(vector_length(seg), 1e-6)  # (T,)
     rel = local[..., None, :] - start  # (..., T, 2)
