@@ -46,17 +46,33 @@ def generate_scenario(seed: int, index: int, sizes: Sizes | None = None, topolog
     knobs = knobs or DEFAULT_KNOBS
     rng = np.random.default_rng([int(seed), int(index)])
     street_rng = np.random.default_rng([int(seed), int(index), STREET_OBJECT_STREAM])
+    # `sdc_uturn`: few maps have a car that U-turns in the episode, so such a scene tries fresh networks for one
+    # (keeping the first SDC found when none does); drawn only when the knob is on
+    wants_uturn = knobs.sdc_uturn > 0 and bool(rng.random() < knobs.sdc_uturn)
+    chosen = None
     for _ in range(MAX_ATTEMPTS):
         network = build_network(rng, topology, knobs)
         traffic = simulate(network, rng, sizes.num_timesteps, knobs)
         traffic = with_street_objects(traffic, network, street_rng, knobs.street_objects)
-        sdc = _choose_sdc(network, traffic, rng, sizes, knobs)
-        if sdc is not None:
-            box_share = np.random.default_rng([int(seed), int(index), SDC_BOX_STREAM]).uniform()
-            scenario = _sdc_box(_assemble(scenario_id(seed, index), network, traffic, sdc, sizes),
-                                *knobs.sdc_box(box_share))
-            return fit_to_budget(_tracking_noise(scenario, rng, knobs), sizes)
-    raise GenerationError(f"{scenario_id(seed, index)}: no vehicle fit to be the SDC in {MAX_ATTEMPTS} attempts")
+        sdc = _choose_sdc(network, traffic, rng, sizes, knobs, wants_uturn)
+        if sdc is None:
+            continue
+        turns_back = wants_uturn and _enters_uturn(network, traffic, sdc)
+        chosen = (network, traffic, sdc) if chosen is None or turns_back else chosen
+        if not wants_uturn or turns_back:
+            break
+    if chosen is None:
+        raise GenerationError(f"{scenario_id(seed, index)}: no vehicle fit to be the SDC in {MAX_ATTEMPTS} attempts")
+    network, traffic, sdc = chosen
+    box_share = np.random.default_rng([int(seed), int(index), SDC_BOX_STREAM]).uniform()
+    scenario = _sdc_box(_assemble(scenario_id(seed, index), network, traffic, sdc, sizes), *knobs.sdc_box(box_share))
+    return fit_to_budget(_tracking_noise(scenario, rng, knobs), sizes)
+
+
+def _enters_uturn(network: RoadNetwork, traffic: Traffic, obj: int) -> bool:
+    """Whether mover `obj` enters a U-turn lane during the logged episode (not in the warm-up)."""
+    uturns = {lane.lane_id for lane in network.lanes if lane.is_uturn}
+    return any(lane in uturns and step >= 1 for lane, step in traffic.gates_entered[obj])
 
 
 SLOW_START_MPS = 2.0  # `sdc_slow_start`: a candidate this slow at the current step starts nearly at rest
@@ -65,12 +81,14 @@ STANDING_MPS, WAIT_STEPS = 0.5, 30
 
 
 def _choose_sdc(network: RoadNetwork, traffic: Traffic, rng: np.random.Generator, sizes: Sizes,
-                knobs: SyntheticKnobs = DEFAULT_KNOBS) -> int | None:
+                knobs: SyntheticKnobs = DEFAULT_KNOBS, wants_uturn: bool = False) -> int | None:
     """A car valid at every step that moves, never passes a red stop point and, where the map
     has junction or merge lanes, drives through one during the episode; with the `sdc_slow_start` knob's
     chance, one of those nearly at rest at the current step (when there is one), and with the `sdc_waits` knob's, one
     that stands for 3 s or more of the episode (at a light, a stop, in a queue); with the `sdc_stands_through` knob's,
-    one that stands at every step from the current one on (it never moves in the episode), before all of these."""
+    one that stands at every step from the current one on (it never moves in the episode), before all of these; with
+    `wants_uturn` (the `sdc_uturn` knob), one that enters a U-turn lane during the episode (when there is one), after
+    all of them."""
     is_car = (traffic.object_type == OBJECT_TYPE_VEHICLE) & ~traffic.is_parked & (traffic.length < 5.5)
     always_valid = is_car & traffic.valid.all(axis=1)
     if knobs.sdc_stands_through > 0 and rng.random() < knobs.sdc_stands_through:
@@ -95,6 +113,8 @@ def _choose_sdc(network: RoadNetwork, traffic: Traffic, rng: np.random.Generator
         standing = (traffic.speed[:, sizes.current_time_index:] < STANDING_MPS).sum(axis=1)
         waiting = [c for c in clean if standing[c] >= WAIT_STEPS]
         pool = [c for c in waiting if c in through] or waiting or pool
+    if wants_uturn:
+        pool = [c for c in clean if _enters_uturn(network, traffic, c)] or pool
     return int(pool[int(rng.integers(len(pool)))])
 
 

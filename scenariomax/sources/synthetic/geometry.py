@@ -38,6 +38,16 @@ def bezier(p0: np.ndarray, h0: np.ndarray, p1: np.ndarray, h1: np.ndarray, num: 
     return ((1 - t) ** 3) * p0 + 3 * ((1 - t) ** 2) * t * c0 + 3 * (1 - t) * (t ** 2) * c1 + (t ** 3) * p1
 
 
+def half_turn(start: np.ndarray, heading: np.ndarray, end: np.ndarray, spacing: float = 1.0) -> np.ndarray:
+    """Half circle leaving `start` along unit `heading` and arriving at `end` the opposite way (a U-turn); `end`
+    lies square to the heading beside `start`, the diameter apart. -> (n, 2)"""
+    center = (start + end) / 2
+    radial = start - center
+    turns_left = float(np.dot(left_normal(radial), heading)) > 0  # counter-clockwise leaves start along heading
+    return arc(center, float(np.linalg.norm(radial)), float(np.arctan2(radial[1], radial[0])),
+               np.pi if turns_left else -np.pi, spacing)
+
+
 def join(*parts: np.ndarray) -> np.ndarray:
     """Concatenates polylines, dropping the repeated joint points. -> (n, 2)"""
     out = [parts[0]]

@@ -44,6 +44,15 @@ class SyntheticKnobs:
     # split phases never show (the blind teacher driving has a vehicle crossing the corridor ahead at 0.2% of its
     # moving steps, 5.9% on real scenes; with every four-way junction paired 0.37%: docs/learning.md, session 46)
     paired_signals: float = 0.0
+    # chance that each arm of a junction with 3 or more lanes each way has a U-turn lane, from its innermost incoming
+    # lane round into its outermost outgoing one (a half circle of 1.5 lane widths' radius): real routes U-turn at
+    # junctions (GPUDrive 2d84b1ab, one of the 29 judged real scenes, fails off-road in 28% of checkpoints) and the
+    # generator drew none, so no student had seen one. Drawn only when on
+    junction_uturns: float = 0.0
+    # chance that the SDC is chosen among the cars that enter a U-turn lane during the episode, when there are any
+    # (with junction_uturns on, a car in ~13 junction scenes U-turns, too few for a student to learn from). Drawn only
+    # when on, after the other SDC rules
+    sdc_uturn: float = 0.0
     # range of the metres each parked car stands nearer the lanes than its spot's centre (drawn per car, and cut
     # so that every vehicle the log drives past it keeps traffic.PARKED_CLEARANCE_M): real kerbside cars
     # reach towards the lane (a real route passes parked cars' centres at 1.5-2.5 m; the spots' centres are ~3 m
@@ -108,6 +117,8 @@ class SyntheticKnobs:
                              f"got {self.max_parked!r}")
         _check_number("junction_parking", self.junction_parking, 0.0, 1.0)
         _check_number("paired_signals", self.paired_signals, 0.0, 1.0)
+        _check_number("junction_uturns", self.junction_uturns, 0.0, 1.0)
+        _check_number("sdc_uturn", self.sdc_uturn, 0.0, 1.0)
         _check_range("parked_reach", self.parked_reach, 0.0, 2.0)
         _check_range("walkers_per_crosswalk", self.walkers_per_crosswalk, 0.0, 12.0)
         _check_number("sdc_slow_start", self.sdc_slow_start, 0.0, 1.0)

@@ -46,6 +46,7 @@ class Lane:
     is_gated: bool  # entering needs a reservation (junction connectors, merge zones)
     conflicts: tuple[int, ...]  # gated lanes that may not be occupied together with this one
     yields_to: tuple[int, ...]  # priority lanes whose approaching traffic this lane gives way to
+    is_uturn: bool = False  # a junction lane turning back into the road it came from (knob junction_uturns)
 
     @property
     def length(self) -> float:
@@ -105,6 +106,7 @@ class _LaneDraft:
     has_stop_sign: bool = False
     is_gated: bool = False
     yields: bool = False  # gives way to the other gated lanes it conflicts with
+    is_uturn: bool = False
 
 
 class NetworkBuilder:
@@ -137,10 +139,11 @@ class NetworkBuilder:
             self.draft(left).right.append(right)
             self.draft(right).left.append(left)
 
-    def connect(self, before: int, after: int, is_gated: bool = True, **flags) -> int:
-        """A junction lane joining the end of `before` to the start of `after` smoothly."""
+    def connect(self, before: int, after: int, is_gated: bool = True, xy: np.ndarray | None = None, **flags) -> int:
+        """A junction lane joining the end of `before` to the start of `after` smoothly (along `xy` when given)."""
         a, b = self.draft(before), self.draft(after)
-        xy = geo.bezier(a.xy[-1], geo.tangents(a.xy)[-1], b.xy[0], geo.tangents(b.xy)[0])
+        if xy is None:
+            xy = geo.bezier(a.xy[-1], geo.tangents(a.xy)[-1], b.xy[0], geo.tangents(b.xy)[0])
         lane = self.add_lane(xy, min(a.width, b.width), min(a.speed_limit, b.speed_limit), a.lane_type,
                              is_gated=is_gated, **flags)
         self.link(before, lane)
@@ -190,6 +193,7 @@ class NetworkBuilder:
                 light_index=light_index.get(i, -1), has_stop_sign=d.has_stop_sign, is_gated=d.is_gated,
                 conflicts=conflicts[i],
                 yields_to=tuple(c for c in conflicts[i] if d.yields and not drafts[c - FIRST_LANE_ID].yields),
+                is_uturn=d.is_uturn,
             )
             for i, d in enumerate(drafts)
         )

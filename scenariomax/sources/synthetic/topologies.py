@@ -183,9 +183,27 @@ def _junction(rng: np.random.Generator, topology: str, arm_angles: list[float], 
                 draft.signal_group = a % num_groups
             else:
                 draft.has_stop_sign = True
+    if knobs.junction_uturns > 0:  # drawn only when the knob is on: the default random stream stays
+        _add_uturns(b, [(incoming, outgoing) for _, outgoing, incoming in arms], rng, knobs.junction_uturns)
     if control == "signal":
         b.signal_plan = random_plan(rng, num_groups, has_crosswalks=bool(b.crosswalks))
     return _world(b, rng, knobs)
+
+
+UTURN_MIN_LANES = 3  # lanes each way an arm needs for a U-turn: the half circle's radius is 1.5 lane widths (>= 4.2 m)
+
+
+def _add_uturns(b: NetworkBuilder, arms: list[tuple[list[int], list[int]]], rng: np.random.Generator,
+                chance: float) -> None:
+    """U-turn lanes (added after every other lane, so the other lanes keep their ids): with `chance`, an arm of
+    UTURN_MIN_LANES or more lanes each way turns from its innermost incoming lane round into its outermost outgoing
+    one, a half circle from the stop line into the junction, gated with the incoming lane's approach."""
+    for incoming, outgoing in arms:
+        if min(len(incoming), len(outgoing)) < UTURN_MIN_LANES or rng.random() >= chance:
+            continue
+        entry, exit_ = b.draft(incoming[0]), b.draft(outgoing[-1])
+        b.connect(incoming[0], outgoing[-1], xy=geo.half_turn(entry.xy[-1], geo.tangents(entry.xy)[-1], exit_.xy[0]),
+                  is_uturn=True)
 
 
 def build_intersection4(rng: np.random.Generator, knobs: SyntheticKnobs = DEFAULT_KNOBS) -> RoadNetwork:

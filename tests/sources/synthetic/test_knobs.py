@@ -8,6 +8,7 @@ import pickle
 
 import numpy as np
 import pytest
+import shapely
 from click.testing import CliRunner
 
 import scenariomax
@@ -285,6 +286,35 @@ def test_paired_signals_release_opposite_approaches_together():
     assert max(paired) == 2  # two groups: the opposite approaches share their lights
 
 
+def test_junction_uturns_turn_from_the_innermost_lane_round_into_the_outermost():
+    uturns = 0
+    for i in range(12):
+        plain = build_network(np.random.default_rng([3, i]), "intersection4", SyntheticKnobs())
+        network = build_network(np.random.default_rng([3, i]), "intersection4", SyntheticKnobs(junction_uturns=1.0))
+        assert not any(lane.is_uturn for lane in plain.lanes)
+        for lane in (lane for lane in network.lanes if lane.is_uturn):
+            uturns += 1
+            before, after = network.lane(lane.predecessors[0]), network.lane(lane.successors[0])
+            heading_in, heading_out = before.xy[-1] - before.xy[-2], after.xy[1] - after.xy[0]
+            cos = heading_in @ heading_out / np.linalg.norm(heading_in) / np.linalg.norm(heading_out)
+            assert cos < -0.99  # back the way it came
+            assert before.left_neighbors == () and after.right_neighbors == ()  # innermost in, outermost out
+            assert np.linalg.norm(lane.xy[0] - lane.xy[-1]) / 2 >= 4.2  # a car's turning circle, not a hairpin
+            assert lane.is_gated and lane.conflicts  # it waits its turn with the junction's other lanes
+            assert network.drivable_area.buffer(0.01).contains(shapely.geometry.LineString(lane.xy))
+    assert uturns >= 4
+
+
+def test_sdc_uturn_chooses_sdcs_that_turn_back_at_a_junction():
+    def turned_back(chance):  # scenes whose SDC's heading swings by more than 160 degrees in the log
+        knobs = SyntheticKnobs(junction_uturns=1.0, sdc_uturn=chance)
+        scenes = [generate_scenario(7, i, SIZES, knobs=knobs) for i in range(16)]
+        return sum(np.ptp(np.unwrap(s.bbox_yaw[s.sdc_index][s.valid[s.sdc_index]])) > np.radians(160) for s in scenes)
+
+    assert turned_back(0.0) == 0
+    assert turned_back(1.0) >= 3
+
+
 def test_sdc_slow_start_chooses_sdcs_nearly_at_rest():
     def slow_share(chance):
         scenarios = [generate_scenario(9, i, SIZES, knobs=SyntheticKnobs(sdc_slow_start=chance)) for i in range(30)]
@@ -392,6 +422,7 @@ def test_driver_style_spread_widens_the_traits_around_their_centres():
     ({"topology_weights": "merge:x"}, "topology_weights"),
     ({"max_parked": 2.5}, "max_parked"), ({"max_parked": 99}, "max_parked"), ({"max_parked": True}, "max_parked"),
     ({"junction_parking": 1.5}, "junction_parking"), ({"paired_signals": -0.1}, "paired_signals"),
+    ({"junction_uturns": 2.0}, "junction_uturns"), ({"sdc_uturn": -1.0}, "sdc_uturn"),
     ({"parked_reach": (0.0, 2.5)}, "parked_reach"),
     ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"),
     ({"sdc_slow_start": -0.1}, "sdc_slow_start"), ({"sdc_waits": 1.5}, "sdc_waits"),
@@ -476,6 +507,7 @@ def test_convert_command_rejects_bad_knobs_in_one_line(tmp_path, args, words):
     SyntheticKnobs(junction_parking=1.0, max_parked=48, parked_fraction=(1.0, 1.0), parked_reach=(2.0, 2.0),
                    traffic_density=3.0),
     SyntheticKnobs(paired_signals=1.0, traffic_density=3.0, walkers_per_crosswalk=(3.0, 6.0)),
+    SyntheticKnobs(junction_uturns=1.0, sdc_uturn=1.0, traffic_density=3.0, walkers_per_crosswalk=(3.0, 6.0)),
     SyntheticKnobs(sdc_waits=1.0, sdc_slow_start=1.0, traffic_density=3.0),
     SyntheticKnobs(slow_vehicles=1.0, traffic_density=3.0, sdc_slow_start=1.0),
     SyntheticKnobs(sdc_length_m=8.0, sdc_width_m=3.0, traffic_density=3.0, parked_reach=(1.5, 1.5)),
