@@ -49,8 +49,8 @@ class SyntheticKnobs:
     # junctions (GPUDrive 2d84b1ab, one of the 29 judged real scenes, fails off-road in 28% of checkpoints) and the
     # generator drew none, so no student had seen one. Drawn only when on
     junction_uturns: float = 0.0
-    # chance that the SDC is chosen among the cars that enter a U-turn lane during the episode, when there are any
-    # (with junction_uturns on, a car in ~13 junction scenes U-turns, too few for a student to learn from). Drawn only
+    # chance that the SDC is chosen among the cars that enter a U-turn lane during the episode; such a scene tries up
+    # to MAX_ATTEMPTS fresh networks for one (a car U-turns in the episode in only ~1 junction map of 30). Drawn only
     # when on, after the other SDC rules
     sdc_uturn: float = 0.0
     # range of the metres each parked car stands nearer the lanes than its spot's centre (drawn per car, and cut
