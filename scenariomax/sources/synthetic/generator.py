@@ -57,7 +57,7 @@ def generate_scenario(seed: int, index: int, sizes: Sizes | None = None, topolog
         sdc = _choose_sdc(network, traffic, rng, sizes, knobs, wants_uturn)
         if sdc is None:
             continue
-        turns_back = wants_uturn and _enters_uturn(network, traffic, sdc)
+        turns_back = wants_uturn and _enters_uturn(_uturn_lanes(network), traffic, sdc)
         chosen = (network, traffic, sdc) if chosen is None or turns_back else chosen
         if not wants_uturn or turns_back:
             break
@@ -69,9 +69,12 @@ def generate_scenario(seed: int, index: int, sizes: Sizes | None = None, topolog
     return fit_to_budget(_tracking_noise(scenario, rng, knobs), sizes)
 
 
-def _enters_uturn(network: RoadNetwork, traffic: Traffic, obj: int) -> bool:
-    """Whether mover `obj` enters a U-turn lane during the logged episode (not in the warm-up)."""
-    uturns = {lane.lane_id for lane in network.lanes if lane.is_uturn}
+def _uturn_lanes(network: RoadNetwork) -> set[int]:
+    return {lane.lane_id for lane in network.lanes if lane.is_uturn}
+
+
+def _enters_uturn(uturns: set[int], traffic: Traffic, obj: int) -> bool:
+    """Whether mover `obj` enters one of the `uturns` lanes during the logged episode (not in the warm-up)."""
     return any(lane in uturns and step >= 1 for lane, step in traffic.gates_entered[obj])
 
 
@@ -114,7 +117,8 @@ def _choose_sdc(network: RoadNetwork, traffic: Traffic, rng: np.random.Generator
         waiting = [c for c in clean if standing[c] >= WAIT_STEPS]
         pool = [c for c in waiting if c in through] or waiting or pool
     if wants_uturn:
-        pool = [c for c in clean if _enters_uturn(network, traffic, c)] or pool
+        uturns = _uturn_lanes(network)
+        pool = [c for c in clean if _enters_uturn(uturns, traffic, c)] or pool
     return int(pool[int(rng.integers(len(pool)))])
 
 

@@ -190,7 +190,9 @@ def _junction(rng: np.random.Generator, topology: str, arm_angles: list[float], 
     return _world(b, rng, knobs)
 
 
-UTURN_MIN_LANES = 3  # lanes each way an arm needs for a U-turn: the half circle's radius is 1.5 lane widths (>= 4.2 m)
+# lanes each way an arm needs for a U-turn: the half circle's radius is 1.5 lane widths (>= 4.05 m for the narrowest
+# lanes the knobs allow, 2.7 m; 4.95-5.7 m for the default 3.3-3.8 m)
+UTURN_MIN_LANES = 3
 
 
 def _add_uturns(b: NetworkBuilder, arms: list[tuple[list[int], list[int]]], rng: np.random.Generator,

@@ -299,7 +299,7 @@ def test_junction_uturns_turn_from_the_innermost_lane_round_into_the_outermost()
             cos = heading_in @ heading_out / np.linalg.norm(heading_in) / np.linalg.norm(heading_out)
             assert cos < -0.99  # back the way it came
             assert before.left_neighbors == () and after.right_neighbors == ()  # innermost in, outermost out
-            assert np.linalg.norm(lane.xy[0] - lane.xy[-1]) / 2 >= 4.2  # a car's turning circle, not a hairpin
+            assert np.linalg.norm(lane.xy[0] - lane.xy[-1]) / 2 >= 4.9  # a car's turning circle, not a hairpin
             assert lane.is_gated and lane.conflicts  # it waits its turn with the junction's other lanes
             assert network.drivable_area.buffer(0.01).contains(shapely.geometry.LineString(lane.xy))
     assert uturns >= 4
