@@ -91,12 +91,13 @@ def _choose_sdc(network: RoadNetwork, traffic: Traffic, rng: np.random.Generator
     that stands for 3 s or more of the episode (at a light, a stop, in a queue); with the `sdc_stands_through` knob's,
     one that stands at every step from the current one on (it never moves in the episode), before all of these; with
     `wants_uturn` (the `sdc_uturn` knob), one that enters a U-turn lane during the episode (when there is one), after
-    all of them."""
+    all of them; with the `sdc_behind_stalled` knob's chance, one that ends the episode at rest right behind a stalled
+    car, last."""
     is_car = (traffic.object_type == OBJECT_TYPE_VEHICLE) & ~traffic.is_parked & (traffic.length < 5.5)
     always_valid = is_car & traffic.valid.all(axis=1)
     if knobs.sdc_stands_through > 0 and rng.random() < knobs.sdc_stands_through:
         standing = (traffic.speed[:, sizes.current_time_index:] < STANDING_MPS).all(axis=1)
-        waiting = np.flatnonzero(always_valid & standing)
+        waiting = np.flatnonzero(always_valid & standing & ~traffic.is_stalled)  # a stalled car has no reason to wait
         if len(waiting):
             return int(waiting[int(rng.integers(len(waiting)))])
     candidates = np.flatnonzero(always_valid & (traffic.speed.max(axis=1) > 3.0))
@@ -119,7 +120,26 @@ def _choose_sdc(network: RoadNetwork, traffic: Traffic, rng: np.random.Generator
     if wants_uturn:
         uturns = _uturn_lanes(network)
         pool = [c for c in clean if _enters_uturn(uturns, traffic, c)] or pool
+    if knobs.sdc_behind_stalled > 0 and rng.random() < knobs.sdc_behind_stalled:
+        pool = [c for c in clean if _rests_behind_stalled(traffic, c)] or pool
     return int(pool[int(rng.integers(len(pool)))])
+
+
+# `sdc_behind_stalled`: at the last step the SDC stands (STANDING_MPS) with a stalled car's back this near its front,
+# on its line (a queue's first car; IDM leaves STANDSTILL_GAP_M)
+STALLED_GAP_M, STALLED_LATERAL_M = 6.0, 1.5
+
+
+def _rests_behind_stalled(traffic: Traffic, obj: int) -> bool:
+    """Whether mover `obj` ends the episode at rest right behind a stalled car in its lane."""
+    if traffic.speed[obj, -1] >= STANDING_MPS:
+        return False
+    stalled = np.flatnonzero(traffic.is_stalled)
+    heading = np.array([np.cos(traffic.yaw[obj, -1]), np.sin(traffic.yaw[obj, -1])])
+    rel = np.stack([traffic.x[stalled, -1] - traffic.x[obj, -1], traffic.y[stalled, -1] - traffic.y[obj, -1]], -1)
+    along, across = rel @ heading, rel @ np.array([-heading[1], heading[0]])  # (k,)
+    gap = along - (traffic.length[stalled] + traffic.length[obj]) / 2
+    return bool(np.any((along > 0) & (gap < STALLED_GAP_M) & (np.abs(across) < STALLED_LATERAL_M)))
 
 
 def _runs_red(network: RoadNetwork, traffic: Traffic, states, obj: int) -> bool:

@@ -1,11 +1,12 @@
 """`SyntheticKnobs`: randomisation knobs of the synthetic generator (traffic density, tracking noise, lane
 widths, speed limits, driver styles, parked cars, where they park and how far they reach towards the lanes, how
-the SDC starts, how junction lights are phased, slow drivers, the SDC's size, cones and barriers, topology mix).
+the SDC starts, how junction lights are phased, slow and stalled drivers, the SDC's size, cones and barriers,
+topology mix).
 
 The defaults reproduce the generator exactly (same arrays, same random stream), so a source or a cache made
 with default knobs is the one made before the knobs existed. Every knob widens or shifts a draw the
-generator makes anyway; only the tracking noise, the slow drivers and the street objects draw extra numbers, and only
-when on.
+generator makes anyway; only the tracking noise, the slow and stalled drivers, the U-turns and the street objects draw
+extra numbers, and only when on.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ from collections.abc import Iterable, Mapping
 # The topologies the generator builds, in the order of its default weights (topologies.TOPOLOGIES).
 TOPOLOGY_NAMES: tuple[str, ...] = ("straight", "curve", "intersection4", "intersection3", "merge", "lane_drop",
                                    "roundabout")
+# `stalled_vehicles` above this leaves maps where no car moves, and so none to be the SDC
+MAX_STALLED = 0.5
 # The lane-width range every builder's draw is measured against (`rng.uniform(3.3, 3.8)`).
 BASE_LANE_WIDTH_M: tuple[float, float] = (3.3, 3.8)
 
@@ -79,6 +82,15 @@ class SyntheticKnobs:
     # the moving SDC steps within 30 m, the bc-dagger knobs 3.0%); off in the preset. Drawn after the driver's other
     # traits, only when on
     slow_vehicles: float = 0.0
+    # chance (at most MAX_STALLED: beyond it whole maps stand still) that each vehicle on the road at the start stands
+    # in its lane for the whole scene (broken down, or double-parked for a delivery: a car at rest on a real route's
+    # centreline with no light or queue ahead of it, as in ScenarioNet WOMD 2a1e44d4, where the students run into its
+    # back); the traffic behind it queues. Never on a crosswalk nor within traffic.STALL_CLEAR_M of a junction's gate.
+    # Drawn after the driver's other traits, only when on
+    stalled_vehicles: float = 0.0
+    # chance that the SDC is chosen among the cars that come to rest behind a stalled vehicle in its lane during the
+    # episode, when there are any (most scenes' SDC drives through a junction, away from the stalled cars)
+    sdc_behind_stalled: float = 0.0
     # ranges of the SDC's box, length and width in metres (0:0 the body it drove with; one number a fixed size): every
     # WOMD-derived real record logs the Waymo car as 5.29 m x 2.33 m, nuScenes' as 4.08 x 1.73, AV2's as 4.5 x 2.0, and
     # the generator's cars are 4.0-5.2 x 1.8-2.1. One share of each range is drawn per scene for both (a long car is a
@@ -119,6 +131,8 @@ class SyntheticKnobs:
         _check_number("paired_signals", self.paired_signals, 0.0, 1.0)
         _check_number("junction_uturns", self.junction_uturns, 0.0, 1.0)
         _check_number("sdc_uturn", self.sdc_uturn, 0.0, 1.0)
+        _check_number("stalled_vehicles", self.stalled_vehicles, 0.0, MAX_STALLED)
+        _check_number("sdc_behind_stalled", self.sdc_behind_stalled, 0.0, 1.0)
         _check_range("parked_reach", self.parked_reach, 0.0, 2.0)
         _check_range("walkers_per_crosswalk", self.walkers_per_crosswalk, 0.0, 12.0)
         _check_number("sdc_slow_start", self.sdc_slow_start, 0.0, 1.0)

@@ -132,6 +132,7 @@ def _appended(traffic: Traffic, placed: list[Box]) -> Traffic:
         speed=np.concatenate([traffic.speed, np.zeros((count, steps))]),
         valid=np.concatenate([traffic.valid, np.ones((count, steps), bool)]),
         is_parked=np.concatenate([traffic.is_parked, np.ones(count, bool)]),
+        is_stalled=np.concatenate([traffic.is_stalled, np.zeros(count, bool)]),
         routes=traffic.routes + ((),) * count,
         gates_entered=traffic.gates_entered + ((),) * count,
     )

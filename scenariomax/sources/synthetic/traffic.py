@@ -40,6 +40,9 @@ HARD_GAP_M = 0.3
 MAX_DECEL = 8.0
 MAX_MOVERS = 80
 YIELD_HORIZON_S = 5.0
+# `stalled_vehicles`: a stalled car stands at least this far (bumper to stop line) before its lane's first gate, so it
+# never holds a junction's reservation, and clear of every crosswalk zone by as much
+STALL_CLEAR_M = 8.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,6 +59,7 @@ class Traffic:
     speed: np.ndarray  # (N, T) float64, m/s along yaw
     valid: np.ndarray  # (N, T) bool
     is_parked: np.ndarray  # (N,) bool
+    is_stalled: np.ndarray  # (N,) bool, movers that stand in their lane throughout (knob stalled_vehicles)
     routes: tuple[tuple[int, ...], ...]  # lanes each mover follows (empty for the others)
     gates_entered: tuple[tuple[tuple[int, int], ...], ...]  # (gated lane, logged step; -1 in warm-up)
 
@@ -95,6 +99,15 @@ class _Walker:
         return float(np.arctan2(d[1], d[0]))
 
 
+def crosswalk_zones(shape: RouteShape, length: float) -> list[tuple[int, float, float]]:
+    """(crosswalk, first, last centre arc length along the route) where a body `length` long would be on or by each
+    crosswalk near the route."""
+    return [(index, float(hits[0]), float(hits[-1]))
+            for index, along, across, half_len, half_wid in shape.crosswalks
+            if len(hits := np.flatnonzero((along < half_len + 1.0) & (across < half_wid + length / 2 + 0.8))
+                   * ROUTE_DS_M)]
+
+
 class _World:
     """Mutable simulation state (internal; `simulate` is the pure entry point)."""
 
@@ -113,6 +126,7 @@ class _World:
         self.v_desired = np.ones((cap, MAX_ROUTE_POINTS))  # desired speed along the route
         self.kind = np.zeros(cap, np.int64)
         self.active = np.zeros(cap, bool)
+        self.stalled = np.zeros(cap, bool)  # stands where it was placed (knob stalled_vehicles)
         self.route_xy = np.zeros((cap, MAX_ROUTE_POINTS, 2))
         self.route_yaw = np.zeros((cap, MAX_ROUTE_POINTS))
         self.last_index = np.zeros(cap, np.int64)
@@ -150,7 +164,8 @@ class _World:
             self.shapes[route] = route_shape(self.net, route)
         return self.shapes[route]
 
-    def spawn(self, route: tuple[int, ...], s: float, speed: float, body: ag.Body, driver: ag.Driver) -> bool:
+    def spawn(self, route: tuple[int, ...], s: float, speed: float, body: ag.Body, driver: ag.Driver,
+              stalled: bool = False) -> bool:
         if self.count >= MAX_MOVERS:
             return False
         shape = self.shape(route)
@@ -168,10 +183,7 @@ class _World:
         self.a_max[slot], self.b_comf[slot], self.headway[slot] = (driver.max_accel, driver.comfort_decel,
                                                                    driver.time_headway)
         self.active[slot] = True
-        zones = [(index, float(hits[0]), float(hits[-1]))
-                 for index, along, across, half_len, half_wid in shape.crosswalks
-                 if len(hits := np.flatnonzero((along < half_len + 1.0) & (across < half_wid + body.length / 2 + 0.8))
-                        * ROUTE_DS_M)]
+        zones = crosswalk_zones(shape, body.length)
         self.plans[slot] = _Plan(route, list(shape.gates), zones)
         first = self.net.lanes[0].lane_id
         for k, lane_id in enumerate(route[:MAX_ROUTE_LANES]):
@@ -181,7 +193,8 @@ class _World:
         for sibling, start in shape.siblings:
             self.lane_offset[slot, sibling - first] = start
             self.is_sibling[slot, sibling - first] = True
-        self.gate_s[slot] = shape.gates[0].start_s if shape.gates else np.inf
+        self.gate_s[slot] = shape.gates[0].start_s if shape.gates and not stalled else np.inf
+        self.stalled[slot] = stalled
         self.release_at[slot] = np.inf
         self.has_zones[slot] = bool(zones)
         return True
@@ -350,6 +363,7 @@ class _World:
         new_speed = np.maximum(speed + accel * DT_S, 0.0)
         room = np.minimum(gap, stop_gap) - HARD_GAP_M
         new_speed = np.minimum(new_speed, np.maximum(room, 0.0) / DT_S)
+        new_speed[self.stalled[slots]] = 0.0
         self.v[slots] = new_speed
         self.s[slots] += new_speed * DT_S
         gone = slots[self.s[slots] + self.length[slots] / 2 > self.last_index[slots] * ROUTE_DS_M - 0.5]
@@ -474,6 +488,7 @@ def _populate(world: _World, rng: np.random.Generator, urban: bool, knobs: Synth
         if lane.is_gated or lane.length < 20.0:
             continue
         s = float(rng.uniform(4.0, spacing[1])) / density
+        behind_front = -np.inf  # front of the car placed before on this lane (behind this one)
         while True:
             is_bike = urban and not lane.right_neighbors and rng.random() < 0.08
             body = ag.cyclist_body(rng) if is_bike else ag.vehicle_body(rng)
@@ -482,9 +497,27 @@ def _populate(world: _World, rng: np.random.Generator, urban: bool, knobs: Synth
             driver = ag.cyclist_driver(rng, lane.speed_limit) if is_bike else ag.vehicle_driver(rng, knobs)
             s_centre = max(s, body.length / 2 + 1.0)
             speed = lane.speed_limit * driver.speed_factor * float(rng.uniform(0.5, 0.9))
-            if not world.spawn(world.random_route(lane.lane_id), s_centre, speed, body, driver):
+            route = world.random_route(lane.lane_id)
+            # no draw when off: the default stream stays. Cars are placed closer than they stand in a queue (the
+            # warm-up spreads them); one that never moves must leave the car behind it room to stop
+            stalled = (not is_bike and knobs.stalled_vehicles > 0 and rng.random() < knobs.stalled_vehicles
+                       and s_centre - body.length / 2 > behind_front + STANDSTILL_GAP_M
+                       and _may_stall(world, route, s_centre, body.length))
+            if not world.spawn(route, s_centre, 0.0 if stalled else speed, body, driver, stalled=stalled):
                 return
+            behind_front = s_centre + body.length / 2
             s = s_centre + body.length / 2 + float(rng.uniform(*spacing)) / density
+
+
+def _may_stall(world: _World, route: tuple[int, ...], s_centre: float, length: float) -> bool:
+    """Whether a car whose centre is `s_centre` along `route` may stand there all scene: STALL_CLEAR_M before the
+    route's first gate and clear of its crosswalk zones."""
+    shape = world.shape(route)
+    front, back = s_centre + length / 2, s_centre - length / 2
+    if shape.gates and front > shape.gates[0].start_s - STALL_CLEAR_M:
+        return False
+    return not any(back < last + STALL_CLEAR_M and front > first - STALL_CLEAR_M
+                   for _index, first, last in crosswalk_zones(shape, length))
 
 
 def _spawn_at_entry(world: _World, rng: np.random.Generator, lane, urban: bool,
@@ -537,6 +570,7 @@ def _collect(world: _World, parked: dict) -> Traffic:
         object_type=bodies[:, 0].astype(np.int64), length=bodies[:, 1], width=bodies[:, 2], height=bodies[:, 3],
         x=x, y=y, yaw=geo.wrap_angle(yaw), speed=speed, valid=valid,
         is_parked=np.concatenate([np.zeros(len(movers) + n_walk, bool), np.ones(n_park, bool)]),
+        is_stalled=np.concatenate([world.stalled[movers], np.zeros(n_walk + n_park, bool)]),
         routes=tuple(world.plans[m].route for m in movers) + ((),) * (n_walk + n_park),
         gates_entered=tuple(tuple(world.plans[m].entered) for m in movers) + ((),) * (n_walk + n_park),
     )

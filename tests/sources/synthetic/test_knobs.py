@@ -360,6 +360,59 @@ def test_slow_vehicles_puts_crawling_leaders_on_the_road():
     assert agents.SLOW_SPEED_FACTOR[0] <= min(factors) and max(factors) <= agents.SLOW_SPEED_FACTOR[1]
 
 
+# the bc-dagger preset's traffic knobs, with which the stalled-car knobs are meant to train
+PRESET_TRAFFIC = dict(traffic_density=1.5, parked_fraction=(0.4, 0.9), max_parked=40, junction_parking=0.6,
+                      sdc_slow_start=1.0)
+
+
+def _standing_in_lane(s) -> np.ndarray:
+    """(N,) vehicles valid and at rest at every step whose box reaches within 1.5 m of some lane centre (a parked car
+    stands ~3 m off)."""
+    still = (s.object_type == OBJECT_TYPE_VEHICLE) & s.valid.all(axis=1) & (np.abs(s.speed) < 0.01).all(axis=1)
+    lanes = s.roadgraph_xyz[s.roadgraph_valid & np.isin(s.roadgraph_type, list(LANE_TYPES))][:, :2]
+    centre = np.stack([s.x[:, 0], s.y[:, 0]], -1)
+    near = np.min(np.linalg.norm(centre[:, None] - lanes[None], axis=-1), axis=1) < 1.5
+    return still & near
+
+
+def _rests_behind_one(s, standing: np.ndarray, obj: int) -> bool:
+    """Whether object `obj` ends at rest with one of the `standing` cars' back within 6 m of its front, on its line."""
+    h = np.array([np.cos(s.bbox_yaw[obj, -1]), np.sin(s.bbox_yaw[obj, -1])])
+    rel = np.stack([s.x[:, -1] - s.x[obj, -1], s.y[:, -1] - s.y[obj, -1]], -1)
+    along, across = rel @ h, rel @ np.array([-h[1], h[0]])
+    gap = along - (s.length[:, -1] + s.length[obj, -1]) / 2
+    return bool(s.speed[obj, -1] < STANDING_MPS and np.any(standing & (along > 0) & (gap < 6) & (np.abs(across) < 1.5)))
+
+
+def test_stalled_vehicles_stand_in_their_lanes_off_the_crosswalks_and_the_traffic_queues_behind():
+    def scenes(chance):
+        return [generate_scenario(21, i, SIZES, knobs=SyntheticKnobs(stalled_vehicles=chance, **PRESET_TRAFFIC))
+                for i in range(12)]
+
+    usual, stalled = scenes(0.0), scenes(0.3)
+    assert sum(_standing_in_lane(s).sum() for s in stalled) >= sum(_standing_in_lane(s).sum() for s in usual) + 10
+    for s in stalled:  # nobody walks through a stalled car: they stand clear of the crosswalks
+        pairs = overlapping_vehicle_pairs(s, types=(OBJECT_TYPE_VEHICLE, OBJECT_TYPE_PEDESTRIAN))
+        assert not [p for p in pairs if _standing_in_lane(s)[list(p[:2])].any()], s.scenario_id
+    queued = 0  # movers that end at rest right behind a stalled car
+    for s in stalled:
+        standing = _standing_in_lane(s)
+        movers = np.flatnonzero((s.object_type == OBJECT_TYPE_VEHICLE) & s.valid[:, -1] & ~standing)
+        queued += sum(_rests_behind_one(s, standing, obj) for obj in movers)
+    assert queued >= 5
+
+
+def test_sdc_behind_stalled_chooses_sdcs_that_come_to_rest_behind_a_stalled_car():
+    def behind(chance):
+        knobs = SyntheticKnobs(stalled_vehicles=0.1, sdc_behind_stalled=chance, **PRESET_TRAFFIC)
+        scenes = [generate_scenario(21, i, SIZES, knobs=knobs) for i in range(20)]
+        return sum(_rests_behind_one(s, _standing_in_lane(s), s.sdc_index) for s in scenes)
+
+    # most SDCs drive through a junction, away from the stalled cars (3 of 20 measured without the knob, 9 with it;
+    # not every map has a car queued right behind one)
+    assert behind(1.0) >= behind(0.0) + 4
+
+
 def test_sdc_size_gives_the_sdc_the_box_of_a_real_sdc_and_nothing_else_changes():
     real_waymo = SyntheticKnobs(sdc_length_m=5.29, sdc_width_m=2.33)
     for i in range(10):
@@ -427,7 +480,8 @@ def test_driver_style_spread_widens_the_traits_around_their_centres():
     ({"walkers_per_crosswalk": (3.0, 1.0)}, "walkers_per_crosswalk"),
     ({"sdc_slow_start": -0.1}, "sdc_slow_start"), ({"sdc_waits": 1.5}, "sdc_waits"),
     ({"sdc_stands_through": 2.0}, "sdc_stands_through"),
-    ({"slow_vehicles": 2.0}, "slow_vehicles"), ({"sdc_width_m": 3.5}, "sdc_width_m"),
+    ({"slow_vehicles": 2.0}, "slow_vehicles"), ({"stalled_vehicles": 0.6}, "stalled_vehicles"),
+    ({"sdc_behind_stalled": -0.5}, "sdc_behind_stalled"), ({"sdc_width_m": 3.5}, "sdc_width_m"),
     ({"sdc_length_m": -1.0}, "sdc_length_m"), ({"street_objects": (5.0, 2.0)}, "street_objects"),
 ])
 def test_bad_knobs_raise_one_line_naming_the_knob(kwargs, name):
@@ -510,6 +564,7 @@ def test_convert_command_rejects_bad_knobs_in_one_line(tmp_path, args, words):
     SyntheticKnobs(junction_uturns=1.0, sdc_uturn=1.0, traffic_density=3.0, walkers_per_crosswalk=(3.0, 6.0)),
     SyntheticKnobs(sdc_waits=1.0, sdc_slow_start=1.0, traffic_density=3.0),
     SyntheticKnobs(slow_vehicles=1.0, traffic_density=3.0, sdc_slow_start=1.0),
+    SyntheticKnobs(stalled_vehicles=0.5, sdc_behind_stalled=1.0, traffic_density=3.0, walkers_per_crosswalk=(3.0, 6.0)),
     SyntheticKnobs(sdc_length_m=8.0, sdc_width_m=3.0, traffic_density=3.0, parked_reach=(1.5, 1.5)),
     SyntheticKnobs(street_objects=(64.0, 64.0), traffic_density=3.0, parked_fraction=(1.0, 1.0), max_parked=48,
                    walkers_per_crosswalk=(4.0, 8.0)),
