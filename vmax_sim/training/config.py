@@ -333,7 +333,10 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # synthetic 100% / 0.976 and 99% / 0.966 at the end (sessions 47-48): the lights hidden from both, idm_follow traffic.
 # Objects also read along and across the SDC's route (`obs.object_route_frame=true`, sessions 58-59): held-out
 # synthetic learns faster (its bar met at 400-500k instead of 800k), but the hour's end on real scenes fell on seeds 0
-# and 1 (93.1 -> 89.7%, 96.6 -> 82.8%) and only seed 2's 40 minutes rose: left out.
+# and 1 (93.1 -> 89.7%, 96.6 -> 82.8%) and only seed 2's 40 minutes rose: left out. U-turns in the training scenes
+# (`data.synthetic.junction_uturns=1 data.synthetic.sdc_uturn=0.5`, session 60, seed 0): the real U-turn scene passes
+# at every checkpoint, the rest behind on both splits (end 75.9% real): left out. The attention encoder
+# (`network.name=lq`, session 60, seed 0) was behind the MLP at every checkpoint on both splits: the MLP stays.
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm_follow", "algo.student_drive=0.5", "algo.student_mix=episode",
     "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=600000",
