@@ -175,7 +175,7 @@ class _World:
         self.route_xy[slot, :n], self.route_xy[slot, n:] = shape.xy, shape.xy[-1]
         self.route_yaw[slot, :n], self.route_yaw[slot, n:] = shape.yaw, shape.yaw[-1]
         self.last_index[slot] = n - 1
-        self.s[slot], self.v[slot] = s, speed
+        self.s[slot], self.v[slot] = s, 0.0 if stalled else speed
         self.length[slot], self.width[slot], self.height[slot] = body.length, body.width, body.height
         self.kind[slot] = body.object_type
         desired = anticipate(np.minimum(shape.speed_limit * driver.speed_factor, shape.bend_speed))
@@ -503,7 +503,7 @@ def _populate(world: _World, rng: np.random.Generator, urban: bool, knobs: Synth
             stalled = (not is_bike and knobs.stalled_vehicles > 0 and rng.random() < knobs.stalled_vehicles
                        and s_centre - body.length / 2 > behind_front + STANDSTILL_GAP_M
                        and _may_stall(world, route, s_centre, body.length))
-            if not world.spawn(route, s_centre, 0.0 if stalled else speed, body, driver, stalled=stalled):
+            if not world.spawn(route, s_centre, speed, body, driver, stalled=stalled):
                 return
             behind_front = s_centre + body.length / 2
             s = s_centre + body.length / 2 + float(rng.uniform(*spacing)) / density
