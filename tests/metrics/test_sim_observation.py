@@ -245,6 +245,24 @@ def test_route_selection_keeps_the_car_ahead_that_parked_cars_push_out(index):
         ObservationConfig(object_selection="closest")
 
 
+def test_route_selection_reach_shows_a_car_standing_beyond_the_path_targets(index):
+    # a car at rest 75 m ahead on the route (beyond the 50 m the path targets span: the distance at which a teacher
+    # starts braking for it at 14 m/s) and four cars parked beside the SDC, three slots
+    objects = [(2.0, 4.5, 0.0, 0.0), (-2.0, 4.5, 0.0, 0.0), (5.0, -4.5, 0.0, 0.0), (-5.0, -4.5, 0.0, 0.0),
+               (75.0, 0.0, 0.0, 0.0)]
+    inputs = obs_inputs(objects=objects)
+    shown = {reach: np.asarray(OBSERVE(index, inputs, ObservationConfig(
+        num_objects=3, num_history=K, object_selection="route", route_selection_m=reach)).objects[:, -1, :2])
+        for reach in (None, 50.0, 100.0)}
+    far = [75.0 / 50.0, 0.0]
+    assert not np.any(np.all(np.isclose(shown[None], far, atol=1e-5), axis=1))  # the parked cars fill the slots
+    np.testing.assert_array_equal(shown[50.0], shown[None])  # the targets' own span: the default choice
+    np.testing.assert_allclose(shown[100.0][0], far, atol=1e-5)  # reached: on the route, first
+    np.testing.assert_allclose(shown[100.0][1:], shown[None][:2], atol=1e-5)  # then the nearest, as before
+    with pytest.raises(ValueError, match="route_selection_m"):
+        ObservationConfig(route_selection_m=0.0)
+
+
 def test_object_route_frame_reads_a_car_on_a_bend_as_in_the_way_and_one_beside_it_as_not():
     # the route turns left: 5 m straight ahead, then up +y (targets every 5 m, SDC frame, normalised by 50 m)
     config = ObservationConfig()

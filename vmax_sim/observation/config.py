@@ -58,6 +58,10 @@ class ObservationConfig:
     # streets parked cars and pedestrians beside the SDC can push the car ahead out of the nearest n
     object_selection: str = "nearest"
     route_corridor_m: float = 3.0  # an object whose centre is this near the route polyline ahead is on it
+    # how far along the route ahead (m) an object can count as on it for object_selection="route"; None: as far as the
+    # path targets reach (num_path_targets x path_target_spacing, 50 m). A teacher brakes for a car standing 50-100 m
+    # ahead (IDM's desired gap at 14 m/s is ~75 m), where the student's slots hold the parked cars nearer it instead
+    route_selection_m: float | None = None
     num_history: int = 5  # k steps of history per object (last = now)
     # how many of those steps the SDC sees of itself (None, or k and more: all k). A student that sees itself standing
     # learns to keep standing: its own history predicts its teacher's label better than the scene does
@@ -90,6 +94,9 @@ class ObservationConfig:
         if self.object_selection not in OBJECT_SELECTIONS:
             raise ValueError(f"ObservationConfig.object_selection must be one of {OBJECT_SELECTIONS}, "
                              f"got {self.object_selection!r}")
+        if self.route_selection_m is not None and not self.route_selection_m > 0:
+            raise ValueError(f"ObservationConfig.route_selection_m must be None or positive, "
+                             f"got {self.route_selection_m!r}")
         if self.sdc_history is not None and self.sdc_history < 1:
             raise ValueError(f"ObservationConfig.sdc_history must be None or at least 1, got {self.sdc_history!r}")
         if self.roadgraph_types not in ROADGRAPH_TYPE_SETS:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
+
 import flax.struct
 import jax
 import jax.numpy as jnp
@@ -122,6 +125,17 @@ def route_first_objects(inputs: ObservationInputs, targets: jnp.ndarray, targets
     valid = inputs.object_valid[:, -1]
     # on-route objects rank before every other (distances are far below the offset); invalid ones last
     return lowest_ranked(jnp.where(valid, dist - jnp.where(on_route, 1e6, 0.0), jnp.inf), config.num_objects)
+
+
+def selection_route(inputs: ObservationInputs, config: ObservationConfig, targets: jnp.ndarray,
+                    targets_valid: jnp.ndarray,
+                    projection: PathProjection | None = None) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """The route points `route_first_objects` reads: the path targets, or with `config.route_selection_m` points at
+    the same spacing out to that distance. -> (T', 2) SDC-frame normalised, (T',) valid"""
+    if config.route_selection_m is None:
+        return targets, targets_valid
+    count = max(math.ceil(config.route_selection_m / config.path_target_spacing), 1)
+    return path_targets(inputs, dataclasses.replace(config, num_path_targets=count), projection)
 
 
 def route_polyline(targets: jnp.ndarray, targets_valid: jnp.ndarray,
@@ -331,7 +345,8 @@ def observe(map_index: MapIndex, inputs: ObservationInputs, config: ObservationC
     """
     targets, targets_valid = path_targets(inputs, config, path_projection)
     if config.object_selection == "route":  # its own choice: the metrics' candidates are the nearest
-        candidates = route_first_objects(inputs, targets, targets_valid, config)
+        candidates = route_first_objects(inputs, *selection_route(inputs, config, targets, targets_valid,
+                                                                  path_projection), config)
     elif candidates is None:
         candidates = nearest_objects(inputs.sdc_xy[-1], inputs.object_xy[:, -1], inputs.object_valid[:, -1],
                                      config.num_objects)
