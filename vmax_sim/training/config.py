@@ -337,6 +337,10 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # (`data.synthetic.junction_uturns=1 data.synthetic.sdc_uturn=0.5`, session 60, seed 0): the real U-turn scene passes
 # at every checkpoint, the rest behind on both splits (end 75.9% real): left out. The attention encoder
 # (`network.name=lq`, session 60, seed 0) was behind the MLP at every checkpoint on both splits: the MLP stays.
+# Route-first slots reaching 100 m along the route (`obs.route_selection_m=100`, session 61, seed 0: the teacher brakes
+# for cars 50-100 m ahead that the 50 m slots leave out): ahead or level on real scenes from 100k to 500k (400k: all 29
+# judged passed), behind at 600k, level at the end: one seed, left out until a second agrees. Stalled cars
+# (`data.synthetic.stalled_vehicles=0.05 data.synthetic.sdc_behind_stalled=0.15`, stopped at 300k): left out.
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm_follow", "algo.student_drive=0.5", "algo.student_mix=episode",
     "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=600000",
