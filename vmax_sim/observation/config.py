@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 from scenariomax.schema import LANE_TYPES, ROAD_EDGE_TYPES, ROAD_LINE_TYPES
 
@@ -102,6 +103,13 @@ class ObservationConfig:
         if self.roadgraph_types not in ROADGRAPH_TYPE_SETS:
             raise ValueError(f"ObservationConfig.roadgraph_types must be one of {sorted(ROADGRAPH_TYPE_SETS)}, "
                              f"got {self.roadgraph_types!r}")
+
+    @property
+    def route_selection_targets(self) -> int:
+        """How many route points, path_target_spacing apart, the route-first slots read (route_selection_m's)."""
+        if self.route_selection_m is None:
+            return self.num_path_targets
+        return max(math.ceil(self.route_selection_m / self.path_target_spacing), 1)
 
     @property
     def roadgraph_type_ids(self) -> tuple[int, ...]:

@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-import math
-
 import flax.struct
 import jax
 import jax.numpy as jnp
@@ -125,17 +122,6 @@ def route_first_objects(inputs: ObservationInputs, targets: jnp.ndarray, targets
     valid = inputs.object_valid[:, -1]
     # on-route objects rank before every other (distances are far below the offset); invalid ones last
     return lowest_ranked(jnp.where(valid, dist - jnp.where(on_route, 1e6, 0.0), jnp.inf), config.num_objects)
-
-
-def selection_route(inputs: ObservationInputs, config: ObservationConfig, targets: jnp.ndarray,
-                    targets_valid: jnp.ndarray,
-                    projection: PathProjection | None = None) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """The route points `route_first_objects` reads: the path targets, or with `config.route_selection_m` points at
-    the same spacing out to that distance. -> (T', 2) SDC-frame normalised, (T',) valid"""
-    if config.route_selection_m is None:
-        return targets, targets_valid
-    count = max(math.ceil(config.route_selection_m / config.path_target_spacing), 1)
-    return path_targets(inputs, dataclasses.replace(config, num_path_targets=count), projection)
 
 
 def route_polyline(targets: jnp.ndarray, targets_valid: jnp.ndarray,
@@ -271,11 +257,13 @@ def light_features(inputs: ObservationInputs, config: ObservationConfig):
     return jnp.pad(feats, ((0, pad), (0, 0))), jnp.pad(valid, (0, pad))
 
 
-def path_targets(inputs: ObservationInputs, config: ObservationConfig, projection: PathProjection | None = None):
+def path_targets(inputs: ObservationInputs, config: ObservationConfig, projection: PathProjection | None = None,
+                 count: int | None = None):
     """Points every `path_target_spacing` m ahead along the on-route path nearest the SDC.
 
     projection: the SDC's `project_on_paths` result when already computed (the metrics have it).
-    -> (num_path_targets, 2) SDC-frame normalised, (num_path_targets,) valid.
+    count: how many points (default `num_path_targets`); each point does not depend on how many are taken.
+    -> (count, 2) SDC-frame normalised, (count,) valid.
     """
     origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
     proj = projection or project_on_paths(inputs.path_xy, inputs.path_valid, inputs.path_arc, origin)
@@ -284,7 +272,8 @@ def path_targets(inputs: ObservationInputs, config: ObservationConfig, projectio
     pxy, pvalid, parc = inputs.path_xy[route], inputs.path_valid[route], inputs.path_arc[route]
     big = jnp.finfo(jnp.float32).max
     arc = jnp.where(pvalid, parc, big)
-    targets = proj.arc[route] + config.path_target_spacing * (1 + jnp.arange(config.num_path_targets))
+    count = config.num_path_targets if count is None else count
+    targets = proj.arc[route] + config.path_target_spacing * (1 + jnp.arange(count))
     hi = jnp.clip(jnp.searchsorted(arc, targets), 1, arc.shape[0] - 1)
     lo = hi - 1
     frac = jnp.clip((targets - arc[lo]) / jnp.maximum(arc[hi] - arc[lo], 1e-6), 0.0, 1.0)
@@ -343,10 +332,13 @@ def observe(map_index: MapIndex, inputs: ObservationInputs, config: ObservationC
     path_projection may pass the SDC's projection on the paths the metrics computed.
     key drives the optional perception noise.
     """
-    targets, targets_valid = path_targets(inputs, config, path_projection)
+    # one pass along the route: the path targets are the first num_path_targets of the points the route-first slots
+    # read out to route_selection_m
+    shown, reach = config.num_path_targets, config.route_selection_targets
+    route_xy, route_valid = path_targets(inputs, config, path_projection, max(shown, reach))
+    targets, targets_valid = route_xy[:shown], route_valid[:shown]
     if config.object_selection == "route":  # its own choice: the metrics' candidates are the nearest
-        candidates = route_first_objects(inputs, *selection_route(inputs, config, targets, targets_valid,
-                                                                  path_projection), config)
+        candidates = route_first_objects(inputs, route_xy[:reach], route_valid[:reach], config)
     elif candidates is None:
         candidates = nearest_objects(inputs.sdc_xy[-1], inputs.object_xy[:, -1], inputs.object_valid[:, -1],
                                      config.num_objects)
