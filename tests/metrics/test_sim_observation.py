@@ -263,6 +263,32 @@ def test_route_selection_reach_shows_a_car_standing_beyond_the_path_targets(inde
         ObservationConfig(route_selection_m=0.0)
 
 
+def test_route_far_slots_add_the_far_car_without_taking_a_near_slot(index):
+    # the scene above with a pedestrian-sized object crossing 8 m ahead off the route: the 100 m route-first choice
+    # gives the far car a slot and drops a near object; a far slot keeps every near one and adds the far car
+    objects = [(2.0, 4.5, 0.0, 0.0), (-2.0, 4.5, 0.0, 0.0), (5.0, -4.5, 0.0, 0.0), (8.0, 6.0, 0.0, 0.0),
+               (75.0, 0.0, 0.0, 0.0)]
+    inputs = obs_inputs(objects=objects)
+
+    def shown(**options):
+        observation = OBSERVE(index, inputs, ObservationConfig(num_objects=3, num_history=K, object_selection="route",
+                                                               **options))
+        xy, valid = np.asarray(observation.objects[:, -1, :2]), np.asarray(observation.objects_valid[:, -1])
+        return xy, valid
+
+    near, _ = shown()
+    reach, _ = shown(route_selection_m=100.0)
+    extra, extra_valid = shown(route_selection_m=100.0, route_far_slots=2)
+    far = [75.0 / 50.0, 0.0]
+    assert np.allclose(reach[0], far, atol=1e-5) and len(reach) == 3  # a near object lost its slot
+    assert extra.shape == (5, 2) and extra_valid.tolist() == [True, True, True, True, False]
+    np.testing.assert_allclose(extra[:3], near, atol=1e-5)  # the near slots as without the reach
+    np.testing.assert_allclose(extra[3], far, atol=1e-5)  # the far car in the first far slot; nothing else that far
+    assert ObservationConfig(route_far_slots=2).num_object_slots == 8  # nearest-first: no far slots
+    with pytest.raises(ValueError, match="route_far_slots"):
+        ObservationConfig(route_far_slots=-1)
+
+
 def test_object_route_frame_reads_a_car_on_a_bend_as_in_the_way_and_one_beside_it_as_not():
     # the route turns left: 5 m straight ahead, then up +y (targets every 5 m, SDC frame, normalised by 50 m)
     config = ObservationConfig()

@@ -63,6 +63,11 @@ class ObservationConfig:
     # path targets reach (num_path_targets x path_target_spacing, 50 m). A teacher brakes for a car standing 50-100 m
     # ahead (IDM's desired gap at 14 m/s is ~75 m), where the student's slots hold the parked cars nearer it instead
     route_selection_m: float | None = None
+    # extra object slots for the on-route objects out to route_selection_m that the num_objects slots leave out
+    # (0: none, the slots above reach route_selection_m themselves). With them the num_objects slots stay the 50 m
+    # route-first choice: on crowded real streets the 100 m choice took the slots of pedestrians and cars within 25 m
+    # at 98% of one nuScenes scene's steps (docs/learning.md, session 62)
+    route_far_slots: int = 0
     num_history: int = 5  # k steps of history per object (last = now)
     # how many of those steps the SDC sees of itself (None, or k and more: all k). A student that sees itself standing
     # learns to keep standing: its own history predicts its teacher's label better than the scene does
@@ -98,11 +103,24 @@ class ObservationConfig:
         if self.route_selection_m is not None and not self.route_selection_m > 0:
             raise ValueError(f"ObservationConfig.route_selection_m must be None or positive, "
                              f"got {self.route_selection_m!r}")
+        if self.route_far_slots < 0:
+            raise ValueError(f"ObservationConfig.route_far_slots must be 0 or more, got {self.route_far_slots!r}")
         if self.sdc_history is not None and self.sdc_history < 1:
             raise ValueError(f"ObservationConfig.sdc_history must be None or at least 1, got {self.sdc_history!r}")
         if self.roadgraph_types not in ROADGRAPH_TYPE_SETS:
             raise ValueError(f"ObservationConfig.roadgraph_types must be one of {sorted(ROADGRAPH_TYPE_SETS)}, "
                              f"got {self.roadgraph_types!r}")
+
+    @property
+    def num_object_slots(self) -> int:
+        """How many objects an observation holds: num_objects, and route_far_slots with the route-first choice."""
+        return self.num_objects + (self.route_far_slots if self.object_selection == "route" else 0)
+
+    @property
+    def route_near_targets(self) -> int:
+        """How many route points the num_objects slots read: all route_selection_m's, or with route_far_slots the
+        path targets' (the far slots read the rest)."""
+        return self.num_path_targets if self.route_far_slots else self.route_selection_targets
 
     @property
     def route_selection_targets(self) -> int:

@@ -109,19 +109,33 @@ def lowest_ranked(rank: jnp.ndarray, num: int) -> tuple[jnp.ndarray, jnp.ndarray
 def route_first_objects(inputs: ObservationInputs, targets: jnp.ndarray, targets_valid: jnp.ndarray,
                         config: ObservationConfig) -> tuple[jnp.ndarray, jnp.ndarray]:
     """The `config.num_objects` slots filled first with the valid objects within `route_corridor_m` of the route
-    ahead (the polyline from the SDC through its path targets), nearest first, then with the nearest others.
+    ahead (the polyline from the SDC through its first `route_near_targets` targets), nearest first, then with the
+    nearest others; then `route_far_slots` more with the nearest on-route objects along all the targets not chosen.
 
-    targets (T, 2) SDC-frame normalised path targets, targets_valid (T,) -> indices (n,) int32, valid (n,) bool.
+    targets (T, 2) SDC-frame normalised route points, targets_valid (T,) -> indices (n,) int32, valid (n,) bool.
     """
     origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
     local = to_local_points(inputs.object_xy[:, -1], origin, origin_yaw)  # (N, 2) m
-    points, seg_valid = route_polyline(targets, targets_valid, config)
-    to_route = point_segment_distance(local[:, None], points[None, :-1], points[None, 1:])  # (N, T)
-    on_route = jnp.any((to_route <= config.route_corridor_m) & seg_valid[None], axis=1)  # (N,)
     dist = vector_length(local)
     valid = inputs.object_valid[:, -1]
+    near = config.route_near_targets
+    on_route = _on_route(local, targets[:near], targets_valid[:near], config)  # (N,)
     # on-route objects rank before every other (distances are far below the offset); invalid ones last
-    return lowest_ranked(jnp.where(valid, dist - jnp.where(on_route, 1e6, 0.0), jnp.inf), config.num_objects)
+    chosen = lowest_ranked(jnp.where(valid, dist - jnp.where(on_route, 1e6, 0.0), jnp.inf), config.num_objects)
+    if not config.route_far_slots:
+        return chosen
+    taken = jnp.zeros(dist.shape, bool).at[chosen[0]].max(chosen[1])  # (N,)
+    far = valid & ~taken & _on_route(local, targets, targets_valid, config)
+    extra = lowest_ranked(jnp.where(far, dist, jnp.inf), config.route_far_slots)
+    return jnp.concatenate([chosen[0], extra[0]]), jnp.concatenate([chosen[1], extra[1]])
+
+
+def _on_route(local: jnp.ndarray, targets: jnp.ndarray, targets_valid: jnp.ndarray,
+              config: ObservationConfig) -> jnp.ndarray:
+    """Whether each object (N, 2) m, SDC frame, lies within `route_corridor_m` of the route through `targets`. (N,)"""
+    points, seg_valid = route_polyline(targets, targets_valid, config)
+    to_route = point_segment_distance(local[:, None], points[None, :-1], points[None, 1:])  # (N, T)
+    return jnp.any((to_route <= config.route_corridor_m) & seg_valid[None], axis=1)
 
 
 def route_polyline(targets: jnp.ndarray, targets_valid: jnp.ndarray,

@@ -78,7 +78,7 @@ def _example_observation(config, env):
     """A batch-of-one observation shaped as the run's (zeros; only shapes matter for init)."""
     obs = config.obs
     points = obs.num_roadgraph_points or _window_points(config)
-    k, n = obs.num_history, obs.num_objects
+    k, n = obs.num_history, obs.num_object_slots
     zeros = jnp.zeros
     return Observation(
         sdc=zeros((1, k, sdc_feature_count(obs))), sdc_valid=zeros((1, k), bool),
