@@ -70,7 +70,8 @@ def drive(loaded, env, teacher_fn, data: str, num_scenarios: int, reach: float) 
                            furthest_ahead(wide) > furthest_ahead(observation), traj.valid[slot, t])
         return sdc_action(state, label)
 
-    evaluate(Policy("teacher", action_fn, needs_observation=True), data_config(config, data, batch_size=8),
+    # one scenario per batch: a last batch is padded with repeats, whose steps the callback cannot tell apart
+    evaluate(Policy("teacher", action_fn, needs_observation=True), data_config(config, data, batch_size=1),
              env_config=env.env_config, obs_config=config.obs, num_scenarios=num_scenarios,
              policy_params=loaded.params)
     label, speed, further, valid = np.concatenate(rows).T

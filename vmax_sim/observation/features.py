@@ -119,18 +119,18 @@ def route_first_objects(inputs: ObservationInputs, targets: jnp.ndarray, targets
     dist = vector_length(local)
     valid = inputs.object_valid[:, -1]
     near = config.route_near_targets
-    on_route = _on_route(local, targets[:near], targets_valid[:near], config)  # (N,)
+    on_route = objects_on_route(local, targets[:near], targets_valid[:near], config)  # (N,)
     # on-route objects rank before every other (distances are far below the offset); invalid ones last
     chosen = lowest_ranked(jnp.where(valid, dist - jnp.where(on_route, 1e6, 0.0), jnp.inf), config.num_objects)
     if not config.route_far_slots:
         return chosen
     taken = jnp.zeros(dist.shape, bool).at[chosen[0]].max(chosen[1])  # (N,)
-    far = valid & ~taken & _on_route(local, targets, targets_valid, config)
+    far = valid & ~taken & objects_on_route(local, targets, targets_valid, config)
     extra = lowest_ranked(jnp.where(far, dist, jnp.inf), config.route_far_slots)
     return jnp.concatenate([chosen[0], extra[0]]), jnp.concatenate([chosen[1], extra[1]])
 
 
-def _on_route(local: jnp.ndarray, targets: jnp.ndarray, targets_valid: jnp.ndarray,
+def objects_on_route(local: jnp.ndarray, targets: jnp.ndarray, targets_valid: jnp.ndarray,
               config: ObservationConfig) -> jnp.ndarray:
     """Whether each object (N, 2) m, SDC frame, lies within `route_corridor_m` of the route through `targets`. (N,)"""
     points, seg_valid = route_polyline(targets, targets_valid, config)
