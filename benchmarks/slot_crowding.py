@@ -14,11 +14,14 @@ Usage: python benchmarks/slot_crowding.py RUN_DIR [--data SHARDS] [--num-scenari
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import json
+import sys
+from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _probe import drive_one_by_one, load_run, probe_parser, report  # noqa: E402
 
 NEAR_M = 25.0  # an object this near the SDC counts as near
 TYPE_NAMES = {1: "vehicle", 2: "pedestrian", 3: "cyclist", 4: "other"}  # the schema's object types
@@ -43,11 +46,8 @@ def drive(loaded, env, data: str, num_scenarios: int, reach: float, far_slots: i
 
     from vmax_sim.datatypes import sdc_action
     from vmax_sim.env.metrics_adapter import observation_inputs, sdc_index
-    from vmax_sim.evaluation.evaluate import evaluate
     from vmax_sim.geometry.transforms import to_local_points
     from vmax_sim.observation.features import objects_on_route, path_targets, route_first_objects
-    from vmax_sim.policies.base import Policy
-    from vmax_sim.training.run import data_config
 
     config = loaded.config
     default = dataclasses.replace(config.obs, object_selection="route", route_selection_m=None, route_far_slots=0)
@@ -78,40 +78,23 @@ def drive(loaded, env, data: str, num_scenarios: int, reach: float, far_slots: i
                            state.sim_trajectory.valid[slot, state.timestep])
         return sdc_action(state, loaded.policy.action_fn(params, state, observation, key).data[slot])
 
-    # one scenario per batch: a last batch is padded with repeats, whose steps the callback cannot tell apart
-    evaluate(Policy("student", action_fn, needs_observation=True), data_config(config, data, batch_size=1),
-             env_config=env.env_config, obs_config=config.obs, num_scenarios=num_scenarios,
-             policy_params=loaded.params)
+    drive_one_by_one(loaded, env, data, num_scenarios, "student", action_fn)
     base, wider, near, far, types, valid = (np.concatenate([step[i] for step in rows]) for i in range(6))
     keep = valid.astype(bool)
     return crowding_shares(base[keep], wider[keep], near[keep], far[keep], types[keep])
 
 
 def main() -> None:
-    from vmax_sim.training.run import components, resolve_eval_data
-    from vmax_sim.training.run_policy import load_trained_policy
-
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run_dir")
-    parser.add_argument("--data")
-    parser.add_argument("--num-scenarios", type=int, default=48)
-    parser.add_argument("--reach", type=float, default=100.0)
+    parser = probe_parser(__doc__.splitlines()[0])
     parser.add_argument("--far-slots", type=int, default=0)
-    parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-
-    loaded = load_trained_policy(args.run_dir, None)
-    env = components(loaded.config)[0]
-    data = args.data or resolve_eval_data(loaded.config, lambda line: None)
-    report = {"run": args.run_dir, "data": data, "reach_m": args.reach, "far_slots": args.far_slots,
+    loaded, env, data = load_run(args)
+    values = {"run": args.run_dir, "data": data, "reach_m": args.reach, "far_slots": args.far_slots,
               **drive(loaded, env, data, args.num_scenarios, args.reach, args.far_slots)}
-    if args.json:
-        print(json.dumps(report, indent=1))
-        return
-    print(f"{args.run_dir} drives {data} ({report['steps']} steps); reach {args.reach:g} m, {args.far_slots} far "
-          f"slots against the default slots: an object within {NEAR_M:g} m left out at "
-          f"{100 * report['near_lost_share']:.1f}% of the steps {report['near_lost_by_type']}, an on-route object "
-          f"beyond the default's reach shown at {100 * report['far_shown_share']:.1f}%")
+    report(args, values, f"{args.run_dir} drives {data} ({values['steps']} steps); reach {args.reach:g} m, "
+           f"{args.far_slots} far slots against the default slots: an object within {NEAR_M:g} m left out at "
+           f"{100 * values['near_lost_share']:.1f}% of the steps {values['near_lost_by_type']}, an on-route object "
+           f"beyond the default's reach shown at {100 * values['far_shown_share']:.1f}%")
 
 
 if __name__ == "__main__":

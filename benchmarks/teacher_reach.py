@@ -14,11 +14,14 @@ Usage: python benchmarks/teacher_reach.py RUN_DIR [--data SHARDS] [--num-scenari
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import json
+import sys
+from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _probe import drive_one_by_one, load_run, probe_parser, report  # noqa: E402
 
 MOVING_MPS = 3.0  # the SDC counts as moving above this speed
 BRAKE = -0.2  # a normalised acceleration label below this brakes
@@ -45,10 +48,7 @@ def drive(loaded, env, teacher_fn, data: str, num_scenarios: int, reach: float) 
 
     from vmax_sim.datatypes import sdc_action
     from vmax_sim.env.metrics_adapter import sdc_index, sdc_observation, step_inputs
-    from vmax_sim.evaluation.evaluate import evaluate
     from vmax_sim.metrics import MetricsConfig, shared_queries
-    from vmax_sim.policies.base import Policy
-    from vmax_sim.training.run import data_config
 
     config = loaded.config
     reaching = dataclasses.replace(config.obs, route_selection_m=reach)
@@ -70,10 +70,7 @@ def drive(loaded, env, teacher_fn, data: str, num_scenarios: int, reach: float) 
                            furthest_ahead(wide) > furthest_ahead(observation), traj.valid[slot, t])
         return sdc_action(state, label)
 
-    # one scenario per batch: a last batch is padded with repeats, whose steps the callback cannot tell apart
-    evaluate(Policy("teacher", action_fn, needs_observation=True), data_config(config, data, batch_size=1),
-             env_config=env.env_config, obs_config=config.obs, num_scenarios=num_scenarios,
-             policy_params=loaded.params)
+    drive_one_by_one(loaded, env, data, num_scenarios, "teacher", action_fn)
     label, speed, further, valid = np.concatenate(rows).T
     keep = valid > 0
     return reach_shares(label[keep], speed[keep], further[keep] > 0)
@@ -84,30 +81,17 @@ def _percent(value: float | None) -> str:
 
 
 def main() -> None:
-    from vmax_sim.training.run import TEACHERS, components, resolve_eval_data
-    from vmax_sim.training.run_policy import load_trained_policy
+    from vmax_sim.training.run import TEACHERS
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run_dir")
-    parser.add_argument("--data")
-    parser.add_argument("--num-scenarios", type=int, default=48)
-    parser.add_argument("--reach", type=float, default=100.0)
-    parser.add_argument("--json", action="store_true")
-    args = parser.parse_args()
-
-    loaded = load_trained_policy(args.run_dir, None)
+    args = probe_parser(__doc__.splitlines()[0]).parse_args()
+    loaded, env, data = load_run(args)
     name = loaded.config.train.teacher if loaded.config.train.teacher != "log" else "pdm"
-    env = components(loaded.config)[0]
-    data = args.data or resolve_eval_data(loaded.config, lambda line: None)
-    report = {"run": args.run_dir, "teacher": name, "data": data, "reach_m": args.reach,
+    values = {"run": args.run_dir, "teacher": name, "data": data, "reach_m": args.reach,
               **drive(loaded, env, TEACHERS[name](env.core), data, args.num_scenarios, args.reach)}
-    if args.json:
-        print(json.dumps(report, indent=1))
-        return
-    print(f"{args.run_dir}: teacher {name} drives {data}; {report['moving_steps']} moving steps, "
-          f"braking at {_percent(report['braking_share'])}; an object further along the route within "
-          f"{args.reach:g} m than the run's slots show: {_percent(report['further_when_braking'])} of the braking "
-          f"steps, {_percent(report['further_otherwise'])} of the others")
+    report(args, values, f"{args.run_dir}: teacher {name} drives {data}; {values['moving_steps']} moving steps, "
+           f"braking at {_percent(values['braking_share'])}; an object further along the route within "
+           f"{args.reach:g} m than the run's slots show: {_percent(values['further_when_braking'])} of the braking "
+           f"steps, {_percent(values['further_otherwise'])} of the others")
 
 
 if __name__ == "__main__":
