@@ -289,6 +289,30 @@ def test_route_far_slots_add_the_far_car_without_taking_a_near_slot(index):
         ObservationConfig(route_far_slots=-1)
 
 
+def test_route_forecast_gives_a_slot_to_the_car_crossing_into_the_route_before_it_is_in_the_way(index):
+    # three cars parked beside the SDC; 20 m ahead a car 12 m left of the route drives across it at 5 m/s (in the
+    # corridor from 1.8 s on) and one 12 m right of it drives away from it; a car follows 10 m behind the SDC at 8 m/s
+    # (its forecast runs up the route); three slots
+    objects = [(2.0, 4.5, 0.0, 0.0), (-2.0, 4.5, 0.0, 0.0), (5.0, -4.5, 0.0, 0.0),
+               (20.0, 12.0, -np.pi / 2, 5.0), (20.0, -12.0, -np.pi / 2, 5.0), (-10.0, 0.0, 0.0, 8.0)]
+    inputs = obs_inputs(objects=objects)
+
+    def shown(seconds):
+        config = ObservationConfig(num_objects=3, num_history=K, object_selection="route", route_forecast_s=seconds)
+        return np.asarray(OBSERVE(index, inputs, config).objects[:, -1, :2])
+
+    crossing = [20.0 / 50.0, 12.0 / 50.0]
+    now_only = shown(0.0)
+    assert not np.any(np.all(np.isclose(now_only, crossing, atol=1e-5), axis=1))  # the parked cars fill the slots
+    np.testing.assert_array_equal(shown(1.5), now_only)  # not on the route within 1.5 s: the same choice
+    ahead = shown(4.0)
+    np.testing.assert_allclose(ahead[0], crossing, atol=1e-5)  # heading onto the route: first
+    np.testing.assert_allclose(ahead[1:], now_only[:2], atol=1e-5)  # then the nearest; not the follower, not the other
+    assert ObservationConfig(route_forecast_s=2.0).route_forecast_times == (0.5, 1.0, 1.5, 2.0)
+    with pytest.raises(ValueError, match="route_forecast_s"):
+        ObservationConfig(route_forecast_s=-1.0)
+
+
 def test_object_route_frame_reads_a_car_on_a_bend_as_in_the_way_and_one_beside_it_as_not():
     # the route turns left: 5 m straight ahead, then up +y (targets every 5 m, SDC frame, normalised by 50 m)
     config = ObservationConfig()

@@ -49,6 +49,7 @@ class NoiseConfig:
 
 
 OBJECT_SELECTIONS = ("nearest", "route")
+ROUTE_FORECAST_STEP_S = 0.5  # s between the forecast positions tested against the route
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,6 +69,12 @@ class ObservationConfig:
     # route-first choice: on crowded real streets the 100 m choice took the slots of pedestrians and cars within 25 m
     # at 98% of one nuScenes scene's steps (docs/learning.md, session 62)
     route_far_slots: int = 0
+    # seconds of constant-velocity forecast (every ROUTE_FORECAST_STEP_S) in which an object heading onto the route
+    # counts as on it for object_selection="route" (0: its position now only). A car crossing the junction the SDC
+    # pulls into stands beside the route until it is in the way: on a crowded nuScenes street the slots left such cars
+    # out at 76% of the steps where the student drove into one (docs/learning.md, session 63); its teacher forecasts
+    # 4 s ahead
+    route_forecast_s: float = 0.0
     num_history: int = 5  # k steps of history per object (last = now)
     # how many of those steps the SDC sees of itself (None, or k and more: all k). A student that sees itself standing
     # learns to keep standing: its own history predicts its teacher's label better than the scene does
@@ -105,6 +112,8 @@ class ObservationConfig:
                              f"got {self.route_selection_m!r}")
         if self.route_far_slots < 0:
             raise ValueError(f"ObservationConfig.route_far_slots must be 0 or more, got {self.route_far_slots!r}")
+        if not self.route_forecast_s >= 0:
+            raise ValueError(f"ObservationConfig.route_forecast_s must be 0 or more, got {self.route_forecast_s!r}")
         if self.sdc_history is not None and self.sdc_history < 1:
             raise ValueError(f"ObservationConfig.sdc_history must be None or at least 1, got {self.sdc_history!r}")
         if self.roadgraph_types not in ROADGRAPH_TYPE_SETS:
@@ -128,6 +137,13 @@ class ObservationConfig:
         if self.route_selection_m is None:
             return self.num_path_targets
         return max(math.ceil(self.route_selection_m / self.path_target_spacing), 1)
+
+    @property
+    def route_forecast_times(self) -> tuple[float, ...]:
+        """The forecast times (s) at which an object may enter the route: ROUTE_FORECAST_STEP_S apart up to
+        route_forecast_s (none when 0)."""
+        count = math.floor(self.route_forecast_s / ROUTE_FORECAST_STEP_S + 1e-6)
+        return tuple(ROUTE_FORECAST_STEP_S * (i + 1) for i in range(count))
 
     @property
     def roadgraph_type_ids(self) -> tuple[int, ...]:

@@ -109,8 +109,9 @@ def lowest_ranked(rank: jnp.ndarray, num: int) -> tuple[jnp.ndarray, jnp.ndarray
 def route_first_objects(inputs: ObservationInputs, targets: jnp.ndarray, targets_valid: jnp.ndarray,
                         config: ObservationConfig) -> tuple[jnp.ndarray, jnp.ndarray]:
     """The `config.num_objects` slots filled first with the valid objects within `route_corridor_m` of the route
-    ahead (the polyline from the SDC through its first `route_near_targets` targets), nearest first, then with the
-    nearest others; then `route_far_slots` more with the nearest on-route objects along all the targets not chosen.
+    ahead (the polyline from the SDC through its first `route_near_targets` targets), now or, for those ahead of the
+    SDC, at one of the `route_forecast_times` at their present velocity, nearest first, then with the nearest others;
+    then `route_far_slots` more with the nearest on-route objects along all the targets not chosen.
 
     targets (T, 2) SDC-frame normalised route points, targets_valid (T,) -> indices (n,) int32, valid (n,) bool.
     """
@@ -120,6 +121,13 @@ def route_first_objects(inputs: ObservationInputs, targets: jnp.ndarray, targets
     valid = inputs.object_valid[:, -1]
     near = config.route_near_targets
     on_route = objects_on_route(local, targets[:near], targets_valid[:near], config)  # (N,)
+    # heading onto the route: a crossing car before it is in the way (ahead of the SDC only: a follower's forecast
+    # runs up the route behind it)
+    for seconds in config.route_forecast_times:
+        forecast = inputs.object_xy[:, -1] + seconds * inputs.object_vel[:, -1]  # (N, 2) m, world frame
+        entering = objects_on_route(to_local_points(forecast, origin, origin_yaw), targets[:near],
+                                    targets_valid[:near], config)
+        on_route = on_route | (entering & (local[:, 0] > 0.0))
     # on-route objects rank before every other (distances are far below the offset); invalid ones last
     chosen = lowest_ranked(jnp.where(valid, dist - jnp.where(on_route, 1e6, 0.0), jnp.inf), config.num_objects)
     if not config.route_far_slots:
