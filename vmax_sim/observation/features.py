@@ -121,13 +121,7 @@ def route_first_objects(inputs: ObservationInputs, targets: jnp.ndarray, targets
     valid = inputs.object_valid[:, -1]
     near = config.route_near_targets
     on_route = objects_on_route(local, targets[:near], targets_valid[:near], config)  # (N,)
-    # heading onto the route: a crossing car before it is in the way (ahead of the SDC only: a follower's forecast
-    # runs up the route behind it)
-    for seconds in config.route_forecast_times:
-        forecast = inputs.object_xy[:, -1] + seconds * inputs.object_vel[:, -1]  # (N, 2) m, world frame
-        entering = objects_on_route(to_local_points(forecast, origin, origin_yaw), targets[:near],
-                                    targets_valid[:near], config)
-        on_route = on_route | (entering & (local[:, 0] > 0.0))
+    on_route = on_route | objects_heading_onto_route(inputs, targets[:near], targets_valid[:near], config)
     # on-route objects rank before every other (distances are far below the offset); invalid ones last
     chosen = lowest_ranked(jnp.where(valid, dist - jnp.where(on_route, 1e6, 0.0), jnp.inf), config.num_objects)
     if not config.route_far_slots:
@@ -144,6 +138,21 @@ def objects_on_route(local: jnp.ndarray, targets: jnp.ndarray, targets_valid: jn
     points, seg_valid = route_polyline(targets, targets_valid, config)
     to_route = point_segment_distance(local[:, None], points[None, :-1], points[None, 1:])  # (N, T)
     return jnp.any((to_route <= config.route_corridor_m) & seg_valid[None], axis=1)
+
+
+def objects_heading_onto_route(inputs: ObservationInputs, targets: jnp.ndarray, targets_valid: jnp.ndarray,
+                               config: ObservationConfig) -> jnp.ndarray:
+    """Whether each object ahead of the SDC lies on the route through `targets` at one of `route_forecast_times`,
+    moving at its present velocity: a car crossing into the route before it is in the way. Objects behind are left
+    out (a follower's forecast runs up the route behind the SDC). (N,)"""
+    origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
+    heading_on = jnp.zeros(inputs.object_xy.shape[0], bool)
+    for seconds in config.route_forecast_times:
+        forecast = inputs.object_xy[:, -1] + seconds * inputs.object_vel[:, -1]  # (N, 2) m, world frame
+        heading_on = heading_on | objects_on_route(to_local_points(forecast, origin, origin_yaw), targets,
+                                                   targets_valid, config)
+    ahead = to_local_points(inputs.object_xy[:, -1], origin, origin_yaw)[:, 0] > 0.0
+    return heading_on & ahead
 
 
 def route_polyline(targets: jnp.ndarray, targets_valid: jnp.ndarray,
