@@ -71,9 +71,9 @@ class ObservationConfig:
     route_far_slots: int = 0
     # seconds of constant-velocity forecast (every ROUTE_FORECAST_STEP_S) in which an object heading onto the route
     # counts as on it for object_selection="route" (0: its position now only). A car crossing the junction the SDC
-    # pulls into stands beside the route until it is in the way: on a crowded nuScenes street the slots left such cars
-    # out at 76% of the steps where the student drove into one (docs/learning.md, session 63); its teacher forecasts
-    # 4 s ahead
+    # pulls into stands beside the route until it is in the way: in the nuScenes window where the student drove into
+    # one the slots left such an object out at 74% of the steps (`benchmarks/route_entry.py`; docs/learning.md,
+    # session 63); its teacher forecasts 4 s ahead
     route_forecast_s: float = 0.0
     num_history: int = 5  # k steps of history per object (last = now)
     # how many of those steps the SDC sees of itself (None, or k and more: all k). A student that sees itself standing
