@@ -145,14 +145,17 @@ def objects_heading_onto_route(inputs: ObservationInputs, targets: jnp.ndarray, 
     """Whether each object ahead of the SDC lies on the route through `targets` at one of `route_forecast_times`,
     moving at its present velocity: a car crossing into the route before it is in the way. Objects behind are left
     out (a follower's forecast runs up the route behind the SDC). (N,)"""
+    num = inputs.object_xy.shape[0]
+    if not config.route_forecast_times:
+        return jnp.zeros(num, bool)
     origin, origin_yaw = inputs.sdc_xy[-1], inputs.sdc_yaw[-1]
-    heading_on = jnp.zeros(inputs.object_xy.shape[0], bool)
-    for seconds in config.route_forecast_times:
-        forecast = inputs.object_xy[:, -1] + seconds * inputs.object_vel[:, -1]  # (N, 2) m, world frame
-        heading_on = heading_on | objects_on_route(to_local_points(forecast, origin, origin_yaw), targets,
-                                                   targets_valid, config)
+    times = jnp.asarray(config.route_forecast_times, jnp.float32)[:, None, None]  # (K, 1, 1) s
+    forecast = inputs.object_xy[None, :, -1] + times * inputs.object_vel[None, :, -1]  # (K, N, 2) m, world frame
+    # every forecast position against the route at once: one route polyline, not one per time
+    on_route = objects_on_route(to_local_points(forecast.reshape(-1, 2), origin, origin_yaw), targets, targets_valid,
+                                config).reshape(-1, num)  # (K, N)
     ahead = to_local_points(inputs.object_xy[:, -1], origin, origin_yaw)[:, 0] > 0.0
-    return heading_on & ahead
+    return on_route.any(axis=0) & ahead
 
 
 def route_polyline(targets: jnp.ndarray, targets_valid: jnp.ndarray,
