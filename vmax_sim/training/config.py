@@ -29,6 +29,7 @@ from vmax_sim.env.config import EnvConfig
 from vmax_sim.env.selfplay import SelfPlayConfig
 from vmax_sim.networks import ENCODER_NAMES, EncoderConfig
 from vmax_sim.observation import NoiseConfig, ObservationConfig
+from vmax_sim.policies.brake_guard import BrakeGuard
 from vmax_sim.rewards import REWARD_PRESETS, RewardConfig
 
 
@@ -98,6 +99,11 @@ class LoopConfig:
     # "median" (each component's median: one member far from the others does not move it) or "cautious" (the mean
     # steering with the smallest acceleration: where one member brakes, the ensemble brakes; bicycle dynamics)
     ensemble_rule: str = "mean"
+    # s; > 0: the run's policy drives with PDM-Closed's emergency brake over its acceleration (braking at 3 m/s^2
+    # when its constant-velocity time to collision with an object ahead is below this; vmax_sim.policies.brake_guard)
+    # in the run's evaluations and in `vmax-sim evaluate --policy RUN`. Training's own rollouts are not guarded:
+    # the student still learns to brake itself. 0: off
+    brake_guard_ttc: float = 0.0
     save_buffer: bool = True  # the replay buffer travels in checkpoints (exact resume of off-policy runs)
     buffer_dtype: str = "float16"  # storage of floating-point observation leaves in the replay buffer
     # simulator steps each policy action is held for during training (one transition, rewards summed);
@@ -137,6 +143,8 @@ class LoopConfig:
         if self.ensemble < 0:
             raise ValueError(f"train.ensemble must be 0 (none) or more checkpoints, got {self.ensemble}")
         check_member_rule(self.ensemble_rule, "train.ensemble_rule")
+        if not 0.0 <= self.brake_guard_ttc <= 10.0:
+            raise ValueError(f"train.brake_guard_ttc must be in [0, 10] s (0: off), got {self.brake_guard_ttc}")
         if self.pool_refresh is not None and (self.pool_refresh < 0 or self.pool_refresh > self.pool_size):
             raise ValueError(f"train.pool_refresh must be in [0, pool_size={self.pool_size}], got {self.pool_refresh}")
         if self.traffic not in TRAFFIC_CHOICES:
@@ -191,6 +199,9 @@ class TrainConfig:
                 self.train.ensemble_rule, getattr(self.algo_config, "member_rule", "mean")):
             raise ValueError(f"the cautious member rule takes the smallest acceleration of (acceleration, curvature) "
                              f"actions; env.dynamics={self.env.dynamics} acts otherwise: choose bicycle dynamics")
+        if self.train.brake_guard_ttc > 0 and self.env.dynamics not in BICYCLE_NAMES:
+            raise ValueError(f"train.brake_guard_ttc brakes (acceleration, curvature) actions; env.dynamics="
+                             f"{self.env.dynamics} acts otherwise: choose bicycle dynamics or leave it 0")
         if self.env.max_num_objects != self.data.num_objects:
             object.__setattr__(self, "env", dataclasses.replace(self.env, max_num_objects=self.data.num_objects))
 
@@ -208,6 +219,12 @@ class TrainConfig:
     def agents_per_env(self) -> int:
         """Learner rows per environment: selfplay.max_agents under self-play, else 1."""
         return self.selfplay.max_agents if self.is_selfplay else 1
+
+
+def brake_guard(config: TrainConfig) -> BrakeGuard | None:
+    """The brake guard over the run's policy (train.brake_guard_ttc), or None."""
+    ttc = config.train.brake_guard_ttc
+    return BrakeGuard(ttc_s=ttc) if ttc > 0 else None
 
 
 def chunk_steps(config: TrainConfig) -> int:

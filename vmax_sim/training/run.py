@@ -51,6 +51,7 @@ from vmax_sim.training.config import (
     TrainConfig,
     action_repeat,
     apply_overrides,
+    brake_guard,
     chunk_steps,
     config_from_dict,
     config_to_dict,
@@ -813,7 +814,7 @@ class _Evaluator:
         from vmax_sim.evaluation.trained import trained_policy
 
         learner = ensemble_learner(components(self.config)[1], self.config.train.ensemble_rule)
-        policy = trained_policy(learner, name=f"{self.policy.name}-ensemble")
+        policy = trained_policy(learner, name=f"{self.policy.name}-ensemble", guard=brake_guard(self.config))
         summary = evaluate(policy, self.data, data_config=self.data, env_config=self.env_config,
                            obs_config=self.config.obs, num_scenarios=self.config.train.eval_scenarios,
                            policy_params=params).summary
@@ -856,7 +857,8 @@ def _policy_of(config: TrainConfig):
     """The evaluation Policy of a configuration's learner (cached: evaluate's rollout compiles once)."""
     from vmax_sim.evaluation.trained import trained_policy
 
-    return trained_policy(components(config)[1], name=f"{config.algo}-{config.network.name}")
+    return trained_policy(components(config)[1], name=f"{config.algo}-{config.network.name}",
+                          guard=brake_guard(config))
 
 
 SELFPLAY_COLUMNS = ("goal_reached", "collision", "offroad", "collision_or_offroad", "goal_reached_clean")

@@ -29,6 +29,7 @@ from vmax_sim.observation import (
 )
 from vmax_sim.policies.base import Policy
 from vmax_sim.training.checkpoint import CheckpointStore
+from vmax_sim.training.config import brake_guard
 from vmax_sim.training.ensemble import ensemble_learner, is_ensemble, member_params
 from vmax_sim.training.run import (
     components,
@@ -70,8 +71,8 @@ def load_trained_policy(run_dir: str | Path, step: int | None = None) -> LoadedP
     except (ValueError, KeyError) as error:
         raise InputError(f"{run_dir}: checkpoint {step} does not match this version's {config.algo} / "
                          f"{config.network.name} networks ({str(error)[:120]})") from None
-    return LoadedPolicy(policy=trained_policy(learner, name), params=params, config=config, env_steps=int(step),
-                        learner=learner)
+    return LoadedPolicy(policy=trained_policy(learner, name, brake_guard(config)), params=params, config=config,
+                        env_steps=int(step), learner=learner)
 
 
 def _example_observation(config, env):

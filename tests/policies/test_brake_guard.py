@@ -1,0 +1,66 @@
+"""The brake guard over a learned policy (train.brake_guard_ttc): PDM-Closed's emergency brake on its acceleration."""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from tests.integration_sim.conftest import CAR_AHEAD_X, braking_scenario
+from tests.policies.scenes import ENV_CONFIG, as_state, empty_road_scenario
+from vmax_sim.env import make_environment
+from vmax_sim.evaluation import run_episode
+from vmax_sim.evaluation.trained import trained_policy
+from vmax_sim.metrics import MetricsConfig
+from vmax_sim.observation import ObservationConfig
+from vmax_sim.policies.brake_guard import BrakeGuard
+from vmax_sim.training.config import apply_overrides, brake_guard
+
+NORMALIZED_ENV = dataclasses.replace(ENV_CONFIG, normalize_actions=True)
+
+
+def _holding_speed_learner():
+    """A learner whose every action is [0, 0] in [-1, 1]: hold the speed, drive straight (constant velocity)."""
+    return types.SimpleNamespace(act=lambda params, observation, key, deterministic: jnp.zeros((1, 2)))
+
+
+def _episode(scenario, guard: BrakeGuard | None):
+    env = make_environment(NORMALIZED_ENV)
+    policy = trained_policy(_holding_speed_learner(), "held", guard)
+    rollout = jax.jit(lambda state: run_episode(env, policy, state, jax.random.PRNGKey(0), MetricsConfig(),
+                                                ObservationConfig(), params={}))(as_state(scenario))
+    rollout = jax.device_get(rollout)
+    return rollout, {k: np.asarray(v) for k, v in rollout.per_step.items()}
+
+
+def test_the_guard_stops_a_driver_that_would_run_into_a_stopped_car():
+    unguarded, _ = _episode(braking_scenario(), None)
+    assert float(unguarded.episode["overlap"]) == 1.0  # holding 10 m/s it hits the car at x = 40 m
+
+    guarded, steps = _episode(braking_scenario(), BrakeGuard())
+    assert float(guarded.episode["overlap"]) == 0.0
+    front = steps["sdc_x"] + 2.25
+    assert front.max() < CAR_AHEAD_X - 2.25  # its front bumper never reaches the car's rear bumper
+    assert steps["speed"][-1] < 2.0 and np.diff(steps["speed"]).min() >= -3.0 * 0.1 - 1e-3  # braked at 3 m/s^2
+
+
+def test_the_guard_leaves_the_policy_alone_on_an_empty_road():
+    unguarded, plain = _episode(empty_road_scenario(speed=8.0), None)
+    guarded, steps = _episode(empty_road_scenario(speed=8.0), BrakeGuard())
+    np.testing.assert_array_equal(steps["sdc_x"], plain["sdc_x"])  # to the last bit
+    assert float(guarded.episode["overlap"]) == 0.0 and abs(steps["speed"][-1] - 8.0) < 0.05
+
+
+def test_brake_guard_ttc_sets_the_runs_guard_and_refuses_bad_values():
+    from vmax_sim.training.config import TrainConfig
+
+    assert brake_guard(TrainConfig()) is None
+    assert brake_guard(apply_overrides(TrainConfig(), ["train.brake_guard_ttc=1.5"])) == BrakeGuard(ttc_s=1.5)
+    with pytest.raises(ValueError, match="train.brake_guard_ttc must be in"):
+        apply_overrides(TrainConfig(), ["train.brake_guard_ttc=-1"])
+    with pytest.raises(ValueError, match="choose bicycle dynamics"):
+        apply_overrides(TrainConfig(), ["env.dynamics=delta_local", "train.brake_guard_ttc=2"])

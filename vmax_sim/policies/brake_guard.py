@@ -1,0 +1,57 @@
+"""PDM-Closed's emergency brake, and the same brake as a guard over another driver's acceleration.
+
+The brake: when the SDC's constant-velocity time to collision with an object ahead
+(`vmax_sim.metrics.time_to_collision`) is below `ttc_s`, brake at `decel` (never so hard that the SDC would reverse
+within the step), unless the driver already brakes harder. PDM-Closed applies it over its best proposal.
+
+As a guard (`train.brake_guard_ttc`) it sits over a learned policy's acceleration: a student imitates its
+teacher's plans but hardly its emergency brake, which fires at a few steps of a few scenes (docs/learning.md: at
+nuScenes scene-0553 a student failed to brake at half of the 375 steps where its teacher did).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+
+from vmax_sim.datatypes import SimulatorState
+from vmax_sim.dynamics.bicycle import DT
+from vmax_sim.metrics import time_to_collision
+from vmax_sim.metrics.step import sdc_box_at
+from vmax_sim.policies.route import Ego, ego_now
+
+
+@dataclasses.dataclass(frozen=True)
+class BrakeGuard:
+    ttc_s: float = 2.0  # s; brake when the SDC's own time to collision with an object ahead is below it
+    decel: float = 3.0  # m/s^2 of braking then (PDM-Closed's emergency_decel)
+
+    def __post_init__(self):
+        if not self.ttc_s > 0 or not self.decel > 0:
+            raise ValueError(f"a brake guard needs ttc_s > 0 and decel > 0, got {self.ttc_s} and {self.decel}")
+
+
+def emergency_acceleration(ego: Ego, boxes: jax.Array, vel: jax.Array, valid: jax.Array, accel: jax.Array,
+                           guard: BrakeGuard) -> jax.Array:
+    """`accel` (m/s^2), or the guard's braking when the SDC at constant velocity would touch an object ahead within
+    `guard.ttc_s`. boxes (K, 5) [x, y, length, width, yaw], vel (K, 2), valid (K,): the objects now -> ()."""
+    ego_box = sdc_box_at(ego.xy, ego.yaw, jnp.stack([ego.length, ego.width]))
+    ego_vel = ego.speed * jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
+    ttc = time_to_collision(ego_box, ego_vel, boxes, vel, valid, guard.ttc_s)
+    brake = jnp.maximum(-guard.decel, -jnp.maximum(ego.speed, 0.0) / DT)  # never reverse
+    return jnp.where(ttc < guard.ttc_s, jnp.minimum(accel, brake), accel)
+
+
+def guarded_acceleration(state: SimulatorState, accel: jax.Array, guard: BrakeGuard) -> jax.Array:
+    """The SDC's acceleration `accel` (m/s^2) of one unbatched state after the guard, against every other object."""
+    now = jax.tree.map(lambda a: jax.lax.dynamic_index_in_dim(a, state.timestep, axis=-1, keepdims=False),
+                       state.sim_trajectory)  # (N,) fields
+    boxes = jnp.stack([now.x, now.y, now.length, now.width, now.yaw], -1).astype(jnp.float32)
+    vel = jnp.stack([now.vel_x, now.vel_y], -1).astype(jnp.float32)
+    return emergency_acceleration(ego_now(state), boxes, vel, now.valid & ~state.object_metadata.is_sdc, accel,
+                                  guard)
+
+
+__all__ = ["BrakeGuard", "emergency_acceleration", "guarded_acceleration"]
