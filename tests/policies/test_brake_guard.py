@@ -19,7 +19,7 @@ from vmax_sim.evaluation.trained import trained_policy
 from vmax_sim.metrics import MetricsConfig
 from vmax_sim.observation import ObservationConfig
 from vmax_sim.policies.brake_guard import BrakeGuard
-from vmax_sim.training.config import apply_overrides, brake_guard
+from vmax_sim.training.config import apply_overrides, brake_guard, policy_name
 
 NORMALIZED_ENV = dataclasses.replace(ENV_CONFIG, normalize_actions=True)
 
@@ -65,7 +65,10 @@ def test_brake_guard_ttc_sets_the_runs_guard_and_refuses_bad_values():
     from vmax_sim.training.config import TrainConfig
 
     assert brake_guard(TrainConfig()) is None
-    assert brake_guard(apply_overrides(TrainConfig(), ["train.brake_guard_ttc=1.5"])) == BrakeGuard(ttc_s=1.5)
+    guarded = apply_overrides(TrainConfig(), ["train.brake_guard_ttc=1.5"])
+    assert brake_guard(guarded) == BrakeGuard(ttc_s=1.5)
+    # tables and pictures never show a guarded student as the student alone
+    assert (policy_name(TrainConfig()), policy_name(guarded)) == ("sac-lq", "sac-lq+guard")
     with pytest.raises(ValueError, match="train.brake_guard_ttc must be in"):
         apply_overrides(TrainConfig(), ["train.brake_guard_ttc=-1"])
     with pytest.raises(ValueError, match="choose bicycle dynamics"):

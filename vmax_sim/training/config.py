@@ -227,6 +227,12 @@ def brake_guard(config: TrainConfig) -> BrakeGuard | None:
     return BrakeGuard(ttc_s=ttc) if ttc > 0 else None
 
 
+def policy_name(config: TrainConfig) -> str:
+    """'bc-mlp', or 'bc-mlp+guard' when the run's policy drives with the brake guard: what tables and pictures
+    call the run's policy, so that a guarded student is never shown as the student alone."""
+    return f"{config.algo}-{config.network.name}" + ("+guard" if brake_guard(config) else "")
+
+
 def chunk_steps(config: TrainConfig) -> int:
     """train.chunk_steps, or its default for the algorithm: 25 env steps off-policy, 1 update for ppo."""
     if config.train.chunk_steps is not None:

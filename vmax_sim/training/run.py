@@ -55,6 +55,7 @@ from vmax_sim.training.config import (
     chunk_steps,
     config_from_dict,
     config_to_dict,
+    policy_name,
     pool_refresh,
 )
 from vmax_sim.training.ensemble import EnsembleCheckpoints, ensemble_learner, is_ensemble, member_params
@@ -857,8 +858,7 @@ def _policy_of(config: TrainConfig):
     """The evaluation Policy of a configuration's learner (cached: evaluate's rollout compiles once)."""
     from vmax_sim.evaluation.trained import trained_policy
 
-    return trained_policy(components(config)[1], name=f"{config.algo}-{config.network.name}",
-                          guard=brake_guard(config))
+    return trained_policy(components(config)[1], name=policy_name(config), guard=brake_guard(config))
 
 
 SELFPLAY_COLUMNS = ("goal_reached", "collision", "offroad", "collision_or_offroad", "goal_reached_clean")

@@ -29,7 +29,7 @@ from vmax_sim.observation import (
 )
 from vmax_sim.policies.base import Policy
 from vmax_sim.training.checkpoint import CheckpointStore
-from vmax_sim.training.config import brake_guard
+from vmax_sim.training.config import brake_guard, policy_name
 from vmax_sim.training.ensemble import ensemble_learner, is_ensemble, member_params
 from vmax_sim.training.run import (
     components,
@@ -56,7 +56,7 @@ def load_trained_policy(run_dir: str | Path, step: int | None = None) -> LoadedP
     config = load_run_config(run_dir)
     store = CheckpointStore(run_dir / "checkpoints")
     env, learner = components(config)
-    name = f"{config.algo}-{config.network.name}@{run_dir.name}"
+    name = f"{policy_name(config)}@{run_dir.name}"
     ensemble = is_ensemble(run_dir) and step is None
     step = store.latest_step() if step is None else step
     if step is None:
