@@ -6,6 +6,7 @@ import pytest
 
 from vmax_sim.agents import PPOConfig, SACConfig
 from vmax_sim.training import apply_overrides, config_from_dict, config_to_dict, preset_config
+from vmax_sim.training.config import policy_name
 
 
 def test_preset_names_choose_algorithm_encoder_reward_and_paper_settings():
@@ -131,6 +132,8 @@ def test_the_dagger_preset_is_the_documented_bc_recipe_and_overrides_still_apply
     assert (config.env.dynamics, config.train.ensemble, config.train.ensemble_every) == ("bicycle_no_reverse", 4, None)
     # a fresh quarter of the map's points hidden in each training observation: steadier on real scenes
     assert config.obs.noise.map_dropout == 0.25 and config.obs.noise.active
+    # PDM-Closed's emergency brake over the student where it drives, and its name says so (docs/learning.md)
+    assert config.train.brake_guard_ttc == 2.0 and policy_name(config) == "bc-mlp+guard"
     assert preset_config("dagger") == config
     # a user's override wins over the preset's
     assert apply_overrides(config, ["algo.buffer_size=50000"]).algo_config.buffer_size == 50_000
