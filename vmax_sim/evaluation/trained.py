@@ -7,6 +7,7 @@ Loading one from a training run directory needs the run's configuration and lear
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 
 from vmax_sim.datatypes import sdc_action
 from vmax_sim.dynamics import BICYCLE
@@ -27,7 +28,7 @@ def trained_policy(learner, name: str = "trained", guard: BrakeGuard | None = No
             physical = BICYCLE.denormalize(action)
             braked = physical.at[0].set(guarded_acceleration(state, physical[0], guard))
             # only a step where the guard brakes changes: elsewhere the policy's own action, to the last bit
-            action = jax.numpy.where(braked[0] < physical[0], BICYCLE.normalize(braked), action)
+            action = jnp.where(braked[0] < physical[0], BICYCLE.normalize(braked), action)
         return sdc_action(state, action)
 
     return Policy(name, action_fn, needs_observation=True)

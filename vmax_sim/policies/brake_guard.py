@@ -1,8 +1,10 @@
-"""PDM-Closed's emergency brake, and the same brake as a guard over another driver's acceleration.
+"""PDM-Closed's emergency brake as a guard over another driver's acceleration.
 
 The brake: when the SDC's constant-velocity time to collision with an object ahead
 (`vmax_sim.metrics.time_to_collision`) is below `ttc_s`, brake at `decel` (never so hard that the SDC would reverse
-within the step), unless the driver already brakes harder. PDM-Closed applies it over its best proposal.
+within the step), unless the driver already brakes harder. The thresholds are PDM-Closed's (`PDMConfig.emergency_ttc`,
+`emergency_decel`); PDM-Closed's own brake (`vmax_sim.policies.pdm`) replaces its proposal's acceleration and checks
+its 16 forecast objects, the guard keeps a harder braking of the driver's own and checks every object.
 
 As a guard (`train.brake_guard_ttc`) it sits over a learned policy's acceleration: a student imitates its
 teacher's plans but hardly its emergency brake, which fires at a few steps of a few scenes (docs/learning.md: at
