@@ -19,7 +19,7 @@ from vmax_sim.evaluation.trained import trained_policy
 from vmax_sim.metrics import MetricsConfig
 from vmax_sim.observation import ObservationConfig
 from vmax_sim.policies.brake_guard import BrakeGuard
-from vmax_sim.training.config import apply_overrides, brake_guard, policy_name
+from vmax_sim.training.config import TrainConfig, apply_overrides, brake_guard, policy_name
 
 NORMALIZED_ENV = dataclasses.replace(ENV_CONFIG, normalize_actions=True)
 
@@ -62,8 +62,6 @@ def test_the_guard_leaves_the_policy_alone_on_an_empty_road():
 
 
 def test_brake_guard_ttc_sets_the_runs_guard_and_refuses_bad_values():
-    from vmax_sim.training.config import TrainConfig
-
     assert brake_guard(TrainConfig()) is None
     guarded = apply_overrides(TrainConfig(), ["train.brake_guard_ttc=1.5"])
     assert brake_guard(guarded) == BrakeGuard(ttc_s=1.5)

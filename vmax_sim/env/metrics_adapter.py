@@ -57,7 +57,7 @@ def _sdc_windows(sim: Trajectory, sdc: jax.Array, timestep: jax.Array) -> tuple[
     return read_unfused(read, timestep, sim.x, sim.y, sim.yaw)
 
 
-def _now(state: SimulatorState) -> Trajectory:
+def fields_now(state: SimulatorState) -> Trajectory:
     """Every simulated field at the current step (the step's cached copy when it has one). -> (N,) fields"""
     return jax.tree.map(lambda a: a[..., 0], state.current_sim_trajectory)
 
@@ -67,7 +67,7 @@ def _size_of(now: Trajectory, index: jax.Array) -> jax.Array:
     return jnp.stack([now.length[index], now.width[index]])
 
 
-def _boxes(now: Trajectory) -> jax.Array:
+def boxes_now(now: Trajectory) -> jax.Array:
     """[x, y, length, width, yaw] per object. (N,) fields -> (N, 5)"""
     return jnp.stack([now.x, now.y, now.length, now.width, now.yaw], axis=-1).astype(jnp.float32)
 
@@ -103,7 +103,7 @@ def step_inputs(state: SimulatorState, path_log_arc: jax.Array | None = None) ->
     t = state.timestep
     sdc = sdc_index(state)
     sim, log = state.sim_trajectory, state.log_trajectory
-    now = _now(state)
+    now = fields_now(state)
     lights = state.log_traffic_light
     light_now = jax.tree.map(lambda a: jax.lax.dynamic_index_in_dim(a, t, axis=-1, keepdims=False), lights)
     paths = state.sdc_paths
@@ -115,7 +115,7 @@ def step_inputs(state: SimulatorState, path_log_arc: jax.Array | None = None) ->
         sdc_yaw=sdc_yaw,
         sdc_size=_size_of(now, sdc),
         sdc_log_xy=jnp.stack([log.x[sdc, t], log.y[sdc, t]]),
-        object_boxes=_boxes(now),
+        object_boxes=boxes_now(now),
         object_vel=jnp.stack([now.vel_x, now.vel_y], axis=-1),
         object_valid=now.valid & ~state.object_metadata.is_sdc,
         light_xy=jnp.stack([light_now.x, light_now.y], axis=-1),
@@ -136,7 +136,7 @@ def observation_inputs(state: SimulatorState, num_history: int = 5) -> Observati
     sdc = sdc_index(state)
     sim = state.sim_trajectory
     window = jax.tree.map(lambda a: _window(a, t, num_history), sim)  # (N, k) fields
-    now = _now(state)
+    now = fields_now(state)
     lights = jax.tree.map(lambda a: jax.lax.dynamic_index_in_dim(a, t, axis=-1, keepdims=False),
                           state.log_traffic_light)
     light_valid = lights.valid if state.lights_hidden is None else lights.valid & ~state.lights_hidden

@@ -20,15 +20,17 @@ import jax.numpy as jnp
 
 from vmax_sim.datatypes import SimulatorState
 from vmax_sim.dynamics.bicycle import DT
+from vmax_sim.env.metrics_adapter import boxes_now, fields_now
 from vmax_sim.metrics import time_to_collision
 from vmax_sim.metrics.step import sdc_box_at
+from vmax_sim.policies.pdm import PDMConfig
 from vmax_sim.policies.route import Ego, ego_now
 
 
 @dataclasses.dataclass(frozen=True)
 class BrakeGuard:
-    ttc_s: float = 2.0  # s; brake when the SDC's own time to collision with an object ahead is below it
-    decel: float = 3.0  # m/s^2 of braking then (PDM-Closed's emergency_decel)
+    ttc_s: float = PDMConfig.emergency_ttc  # s; brake when the SDC's time to collision with an object ahead is below it
+    decel: float = PDMConfig.emergency_decel  # m/s^2 of braking then
 
     def __post_init__(self):
         if not self.ttc_s > 0 or not self.decel > 0:
@@ -48,12 +50,10 @@ def emergency_acceleration(ego: Ego, boxes: jax.Array, vel: jax.Array, valid: ja
 
 def guarded_acceleration(state: SimulatorState, accel: jax.Array, guard: BrakeGuard) -> jax.Array:
     """The SDC's acceleration `accel` (m/s^2) of one unbatched state after the guard, against every other object."""
-    now = jax.tree.map(lambda a: jax.lax.dynamic_index_in_dim(a, state.timestep, axis=-1, keepdims=False),
-                       state.sim_trajectory)  # (N,) fields
-    boxes = jnp.stack([now.x, now.y, now.length, now.width, now.yaw], -1).astype(jnp.float32)
+    now = fields_now(state)  # (N,) fields
     vel = jnp.stack([now.vel_x, now.vel_y], -1).astype(jnp.float32)
-    return emergency_acceleration(ego_now(state), boxes, vel, now.valid & ~state.object_metadata.is_sdc, accel,
-                                  guard)
+    return emergency_acceleration(ego_now(state), boxes_now(now), vel, now.valid & ~state.object_metadata.is_sdc,
+                                  accel, guard)
 
 
 __all__ = ["BrakeGuard", "emergency_acceleration", "guarded_acceleration"]
