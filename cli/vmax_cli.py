@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import sys
 from pathlib import Path
@@ -85,6 +86,24 @@ def bench(as_json, batch_sizes, steps, quick, env_kind, compare_waymax):
 
 def _env_kinds(choice: str) -> tuple[str, ...]:
     return ("real", "minimal") if choice == "both" else (choice,)
+
+
+def _brake_guard_option(ctx, param, value: str) -> float | None:
+    """--brake-guard: "run" -> None (the run's own setting), "off" -> 0.0, else seconds (train.brake_guard_ttc's
+    range)."""
+    from vmax_sim.training.config import BRAKE_GUARD_MAX_TTC_S
+
+    if value == "run":
+        return None
+    if value == "off":
+        return 0.0
+    try:
+        seconds = float(value)
+    except ValueError:
+        seconds = float("nan")
+    if not 0.0 <= seconds <= BRAKE_GUARD_MAX_TTC_S:
+        raise click.BadParameter(f"expected run, off or seconds from 0 to {BRAKE_GUARD_MAX_TTC_S:g}, got {value!r}")
+    return seconds
 
 
 def _check_options(fn):
@@ -233,10 +252,14 @@ def train(preset, data, eval_data, out, resume_dir, quiet, coordinator, num_proc
                    "directory when one is given).")
 @click.option("--view-max", type=click.IntRange(1), default=8, show_default=True,
               help="Scenarios on the --view page.")
+@click.option("--brake-guard", "brake_guard_ttc", default="run", show_default=True, callback=_brake_guard_option,
+              help="Training run directories drive with PDM-Closed's emergency brake over their acceleration as "
+                   "the run says (run: its train.brake_guard_ttc), without it (off: the student alone), or with "
+                   "this time-to-collision threshold in seconds (0-10): the same weights with and without it.")
 @_check_options
 def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, num_scenarios, num_objects, seed,
-             as_json, out, quiet, gallery_dir, gallery_max, gallery_passed, difficulty, view_file, view_max, deep,
-             skip_checks):
+             as_json, out, quiet, gallery_dir, gallery_max, gallery_passed, difficulty, view_file, view_max,
+             brake_guard_ttc, deep, skip_checks):
     """Closed-loop evaluation: accuracy, nuPlan and V-Max scores; several policies give one comparison table."""
     from vmax_sim.evaluation import format_summary
     from vmax_sim.evaluation.evaluate import partial_note
@@ -245,6 +268,7 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
     from vmax_sim.evaluation.report import (
         compare_policies,
         format_markdown,
+        is_run_directory,
         split_policies,
         write_evaluation_settings,
         write_report,
@@ -264,6 +288,8 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
         if traffic is not None:
             mode = dataclasses.replace(mode, agents="learned", agent_policy=traffic, agent_run=agents)
         entries = split_policies(policy)
+        if brake_guard_ttc is not None and not any(is_run_directory(entry) for entry in entries):
+            raise InputError("--brake-guard acts on training run directories; --policy names none")
         _check_data([data or ""], deep, skip_checks, quiet)  # without --data a run's held-out split is checked as read
         out_dir = out if out and not out.endswith(".json") else None
         if view_file == VIEW_DEFAULT and out_dir:
@@ -273,7 +299,8 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
             runs = compare_policies(entries, data, mode, num_scenarios=num_scenarios, batch_size=batch_size,
                                     num_objects=num_objects, seed=seed, progress=not quiet,  # stderr: --json clean
                                     print_fn=lambda line: click.echo(line, err=True), on_batch=extras.on_batch,
-                                    run_evaluator=evaluate_run, stop=stop)
+                                    run_evaluator=functools.partial(evaluate_run, brake_guard_ttc=brake_guard_ttc),
+                                    stop=stop)
         summaries = {run.name: run.result.summary for run in runs}
         if len(runs) == 1:
             text = json.dumps(runs[0].result.summary, indent=2)

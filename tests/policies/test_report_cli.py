@@ -51,6 +51,19 @@ def test_unknown_entries_and_missing_data_are_one_line_errors(tmp_path):
     assert len(result.output.strip().splitlines()) == 1
 
 
+def test_brake_guard_option_refuses_bad_values_and_policies_that_are_not_runs(policy_shards):
+    wrong = CliRunner().invoke(main, ["evaluate", "--policy", "idm", "--data", str(policy_shards),
+                                      "--brake-guard", "soon"])
+    assert wrong.exit_code == 2 and "--brake-guard" in wrong.output and "expected run, off or seconds" in wrong.output
+    too_long = CliRunner().invoke(main, ["evaluate", "--policy", "idm", "--data", str(policy_shards),
+                                         "--brake-guard", "11"])
+    assert too_long.exit_code == 2 and "got '11'" in too_long.output
+    no_run = CliRunner().invoke(main, ["evaluate", "--policy", "idm,pdm", "--data", str(policy_shards),
+                                       "--brake-guard", "off"])
+    assert no_run.exit_code == 2
+    assert no_run.output.strip() == "error: --brake-guard acts on training run directories; --policy names none"
+
+
 def test_run_directories_go_to_the_run_evaluator_the_caller_passes(tmp_path):
     # evaluation does not import training (above it): a run directory needs the evaluator from the caller
     run = tmp_path / "run"

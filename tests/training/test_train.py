@@ -128,6 +128,14 @@ def test_cli_train_then_evaluate_the_run(synthetic_shards, tmp_path):
                      "--json")
     assert evaluated.returncode == 0, evaluated.stderr
     assert json.loads(evaluated.stdout)["num_episodes"] == 4
+    # the same weights with PDM-Closed's emergency brake over them, and without it again: named for what drives
+    guarded = _cli("evaluate", "--policy", str(run), "--data", str(synthetic_shards), "--num-scenarios", "4",
+                   "--brake-guard", "2", "--json")
+    assert guarded.returncode == 0, guarded.stderr
+    assert json.loads(guarded.stdout)["policy"] == "bc-mlp+guard@cli-run"
+    plain = _cli("evaluate", "--policy", str(run), "--data", str(synthetic_shards), "--num-scenarios", "4",
+                 "--brake-guard", "off", "--json")
+    assert json.loads(plain.stdout)["policy"] == "bc-mlp@cli-run"
     bad = _cli("train", "--preset", "bc-mlp", "--out", str(tmp_path / "x"), "algo.learnin_rate=1")
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "learnin_rate" in bad.stderr
     missing = _cli("evaluate", "--policy", str(tmp_path / "nothing"))

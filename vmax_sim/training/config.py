@@ -67,6 +67,7 @@ class TrainDataConfig:
 
 # train.traffic: who drives the objects other than the SDC while training
 TRAFFIC_CHOICES = ("log", "idm", "idm_pass", "idm_follow", "idm_follow_pass")
+BRAKE_GUARD_MAX_TTC_S = 10.0  # train.brake_guard_ttc's upper bound (s)
 TEACHER_CHOICES = ("log", "idm", "pdm", "pdm_state")  # train.teacher: whose actions label BC's (and BC+SAC's) steps
 
 
@@ -143,8 +144,9 @@ class LoopConfig:
         if self.ensemble < 0:
             raise ValueError(f"train.ensemble must be 0 (none) or more checkpoints, got {self.ensemble}")
         check_member_rule(self.ensemble_rule, "train.ensemble_rule")
-        if not 0.0 <= self.brake_guard_ttc <= 10.0:
-            raise ValueError(f"train.brake_guard_ttc must be in [0, 10] s (0: off), got {self.brake_guard_ttc}")
+        if not 0.0 <= self.brake_guard_ttc <= BRAKE_GUARD_MAX_TTC_S:
+            raise ValueError(f"train.brake_guard_ttc must be in [0, {BRAKE_GUARD_MAX_TTC_S:g}] s (0: off), "
+                             f"got {self.brake_guard_ttc}")
         if self.pool_refresh is not None and (self.pool_refresh < 0 or self.pool_refresh > self.pool_size):
             raise ValueError(f"train.pool_refresh must be in [0, pool_size={self.pool_size}], got {self.pool_refresh}")
         if self.traffic not in TRAFFIC_CHOICES:
