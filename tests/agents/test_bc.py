@@ -32,6 +32,34 @@ def test_bc_negative_log_likelihood_hand_value():
     np.testing.assert_allclose(metrics["bc_mae"], math.tanh(0.5), rtol=1e-6)
 
 
+def _fitted_mode(labels: jax.Array, likelihood: str) -> float:
+    """tanh(loc) of one (loc, log_std) fitted by Adam to labels (N,) with BC's likelihood."""
+    import optax
+
+    params, optimizer = jnp.zeros(2), optax.adam(0.05)
+
+    def loss(p):
+        dist = D.TanhGaussian(loc=jnp.full((len(labels), 1), p[0]), log_std=jnp.full((len(labels), 1), p[1]))
+        return bc_losses.nll_loss(dist, labels[:, None], 1e-3, likelihood=likelihood)
+
+    def step(carry, _):
+        p, state = carry
+        updates, state = optimizer.update(jax.grad(loss)(p), state)
+        return (optax.apply_updates(p, updates), state), None
+
+    (params, _), _ = jax.lax.scan(step, (params, optimizer.init(params)), None, length=3000)
+    return float(jnp.tanh(params[0]))
+
+
+def test_laplace_likelihood_follows_the_typical_label_where_rare_hard_brakes_pull_the_gaussian_down():
+    # states that look alike: the teacher accelerates gently at nine of ten and brakes hard at one
+    labels = jnp.array([0.1] * 9 + [-0.9])
+    assert _fitted_mode(labels, "laplace") == pytest.approx(0.1, abs=0.01)
+    assert _fitted_mode(labels, "gaussian") < 0.0  # the mean of the atanh labels: the student would slow down
+    with pytest.raises(ValueError, match="likelihood must be one of gaussian, laplace"):
+        get_config("bc", likelihood="student-t")
+
+
 def test_bc_clips_expert_actions_on_the_bounds():
     dist = D.TanhGaussian(loc=jnp.zeros((2, 1)), log_std=jnp.zeros((2, 1)))
     at_bound = bc_losses.nll_loss(dist, jnp.array([[1.0], [-1.0]]), 1e-3)

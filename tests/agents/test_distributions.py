@@ -45,6 +45,18 @@ def test_density_integrates_to_one():
     assert abs(np.trapezoid(density, a) - 1.0) < 2e-3
 
 
+def test_laplace_density_integrates_to_one_and_hand_value():
+    a = np.linspace(-1 + 1e-6, 1 - 1e-6, 200_001)
+    spread = D.TanhGaussian(loc=jnp.full((a.size, 1), 0.3), log_std=jnp.full((a.size, 1), math.log(0.4)))
+    density = np.exp(np.asarray(D.log_prob(spread, jnp.asarray(a, jnp.float32)[:, None], family="laplace"),
+                                np.float64))
+    assert abs(np.trapezoid(density, a) - 1.0) < 2e-3
+    # at the pre-tanh location: log(1 / (2 b)) - log(1 - tanh(0.3)^2)
+    dist = D.TanhGaussian(loc=jnp.array([[0.3]]), log_std=jnp.log(jnp.array([[0.4]])))
+    at_loc = D.log_prob(dist, jnp.tanh(jnp.array([[0.3]])), family="laplace")
+    np.testing.assert_allclose(at_loc, [math.log(1 / 0.8) - math.log(1 - math.tanh(0.3) ** 2)], rtol=1e-5)
+
+
 def test_sample_log_prob_agrees_with_log_prob_of_the_action_and_sums_over_dims():
     key = jax.random.key(0)
     dist = D.TanhGaussian(loc=jnp.array([[0.2, -0.4, 1.0]] * 64), log_std=jnp.array([[-0.5, 0.0, -1.0]] * 64))

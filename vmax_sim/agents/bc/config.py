@@ -16,6 +16,7 @@ from vmax_sim.agents.common import check_positive, preset
 from vmax_sim.agents.policy import check_member_rule
 
 STUDENT_MIXES = ("episode", "step")
+LIKELIHOODS = ("gaussian", "laplace")  # BCConfig.likelihood: distributions.PRE_TANH_LOG_PROBS keys
 
 
 @dataclasses.dataclass(frozen=True)
@@ -26,6 +27,10 @@ class BCConfig:
     nll_weight: float = 1.0  # weight of -log pi(expert_action | s)
     mse_weight: float = 0.0  # weight of |tanh(loc) - expert_action|^2 (optional anchor of the mode)
     expert_action_eps: float = 1e-3  # expert actions clipped to [-1 + eps, 1 - eps] before atanh
+    # the likelihood's pre-tanh family: "gaussian" (its mode follows the mean of the labels the student cannot tell
+    # apart) or "laplace" (the median: a teacher's rare hard brakes at states that look alike do not pull the
+    # student's everyday acceleration down; its sampled actions stay Gaussian of the same scale)
+    likelihood: str = "gaussian"
     # loss weights of the rows where the SDC stands (its observed speed below standing_speed, in the observation's
     # units: m/s over obs.max_speed, 30 m/s by default), against 1 for the others: pull_away_weight where the label
     # moves off (acceleration above pull_away_accel), standing_weight where it holds. A student standing behind a
@@ -96,6 +101,8 @@ class BCConfig:
         if self.student_mix not in STUDENT_MIXES:
             raise ValueError(f"student_mix must be one of {', '.join(STUDENT_MIXES)}, got {self.student_mix!r}")
         check_member_rule(self.member_rule, "member_rule")
+        if self.likelihood not in LIKELIHOODS:
+            raise ValueError(f"likelihood must be one of {', '.join(LIKELIHOODS)}, got {self.likelihood!r}")
         if self.nll_weight < 0 or self.mse_weight < 0 or self.nll_weight + self.mse_weight == 0:
             raise ValueError("nll_weight and mse_weight must be >= 0 and not both 0")
 

@@ -65,7 +65,7 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
                                   config.pull_away_accel, config.pull_away_weight, config.braking_accel,
                                   config.braking_weight)
         return bc_loss(actor.apply(params, batch.obs), batch.expert_action, config.nll_weight, config.mse_weight,
-                       config.expert_action_eps, weights)
+                       config.expert_action_eps, weights, config.likelihood)
 
     def member_step(params: Params, opt_state, batch: Transition):
         (_, metrics), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch)

@@ -2,8 +2,9 @@
 
     L_BC = nll_weight * mean_B(-log pi(a_E | s)) + mse_weight * mean_B sum_A (tanh(loc(s)) - a_E)^2
 
-log pi is the tanh-Gaussian density of the expert action a_E, clipped to [-1 + eps, 1 - eps] first
-(expert actions often sit on the bounds, where atanh is infinite). With row weights w (B,) every mean_B is
+log pi is the tanh-Gaussian density of the expert action a_E (or with `likelihood="laplace"` the tanh-Laplace one,
+whose mode follows the labels' median), clipped to [-1 + eps, 1 - eps] first (expert actions often sit on the
+bounds, where atanh is infinite). With row weights w (B,) every mean_B is
 the weighted one, sum_B w * x / sum_B w.
 """
 
@@ -23,10 +24,11 @@ def _mean(values: jax.Array, weights: jax.Array | None) -> jax.Array:
     return jnp.mean(values) if weights is None else jnp.sum(weights * values) / jnp.sum(weights)
 
 
-def nll_loss(dist: D.TanhGaussian, expert_action: jax.Array, eps: float, weights: jax.Array | None = None
-             ) -> jax.Array:
-    """mean_B -log pi(a_E | s): dist (B, A), expert_action (B, A), weights (B,) or None -> ()."""
-    return -_mean(D.log_prob(dist, expert_action, eps), weights)
+def nll_loss(dist: D.TanhGaussian, expert_action: jax.Array, eps: float, weights: jax.Array | None = None,
+             likelihood: str = "gaussian") -> jax.Array:
+    """mean_B -log pi(a_E | s): dist (B, A), expert_action (B, A), weights (B,) or None -> (). likelihood: the
+    pre-tanh family (distributions.PRE_TANH_LOG_PROBS)."""
+    return -_mean(D.log_prob(dist, expert_action, eps, likelihood), weights)
 
 
 def mode_mse_loss(dist: D.TanhGaussian, expert_action: jax.Array, weights: jax.Array | None = None) -> jax.Array:
@@ -35,9 +37,10 @@ def mode_mse_loss(dist: D.TanhGaussian, expert_action: jax.Array, weights: jax.A
 
 
 def bc_loss(dist: D.TanhGaussian, expert_action: jax.Array, nll_weight: float = 1.0, mse_weight: float = 0.0,
-            eps: float = 1e-3, weights: jax.Array | None = None) -> tuple[jax.Array, Metrics]:
+            eps: float = 1e-3, weights: jax.Array | None = None, likelihood: str = "gaussian"
+            ) -> tuple[jax.Array, Metrics]:
     """The weighted BC loss () and its metrics (bc_nll, bc_mse, bc_mae: the row-weighted means)."""
-    nll = nll_loss(dist, expert_action, eps, weights)
+    nll = nll_loss(dist, expert_action, eps, weights, likelihood)
     mse = mode_mse_loss(dist, expert_action, weights)
     loss = nll_weight * nll + mse_weight * mse
     metrics = {"bc_loss": scalar(loss), "bc_nll": scalar(nll), "bc_mse": scalar(mse),
