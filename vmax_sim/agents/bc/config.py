@@ -13,10 +13,11 @@ import dataclasses
 from typing import Any
 
 from vmax_sim.agents.common import check_positive, preset
+from vmax_sim.agents.distributions import PRE_TANH_LOG_PROBS
 from vmax_sim.agents.policy import check_member_rule
 
 STUDENT_MIXES = ("episode", "step")
-LIKELIHOODS = ("gaussian", "laplace")  # BCConfig.likelihood: distributions.PRE_TANH_LOG_PROBS keys
+LIKELIHOODS = tuple(PRE_TANH_LOG_PROBS)  # BCConfig.likelihood: "gaussian", "laplace"
 
 
 @dataclasses.dataclass(frozen=True)
