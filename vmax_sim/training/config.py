@@ -376,6 +376,9 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # PDM-Closed's emergency brake over the student when it drives (`train.brake_guard_ttc=2`, session 65; training's
 # rollouts stay unguarded): seed 0's hour passed 3.4-13.8 points more of the 29 judged real scenes at every checkpoint
 # (end 82.8% -> 93.1%), taking away 15 of its 18 at-fault collisions; in the preset, named bc-mlp+guard.
+# The route frame again under the guard (session 66): seed 0's hour kept its log's pace and ended at 96.6% / 0.965 on
+# the real scenes (the preset's 93.1% / 0.831), its 400k checkpoint meeting both bars; seed 1's 42 minutes were behind
+# at 100k and ahead at 200k: not in the preset until seeds 1 and 2 have their hours.
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm_follow", "algo.student_drive=0.5", "algo.student_mix=episode",
     "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=600000",
