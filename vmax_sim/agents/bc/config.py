@@ -30,7 +30,8 @@ class BCConfig:
     expert_action_eps: float = 1e-3  # expert actions clipped to [-1 + eps, 1 - eps] before atanh
     # the likelihood's pre-tanh family: "gaussian" (its mode follows the mean of the labels the student cannot tell
     # apart) or "laplace" (the median: a teacher's rare hard brakes at states that look alike do not pull the
-    # student's everyday acceleration down; its sampled actions stay Gaussian of the same scale)
+    # student's everyday acceleration down; its sampled actions stay Gaussian of the same scale). Measured on the
+    # default preset, seed 2 (session 70): 10-21 points behind the Gaussian on the real scenes from 300k env steps
     likelihood: str = "gaussian"
     # loss weights of the rows where the SDC stands (its observed speed below standing_speed, in the observation's
     # units: m/s over obs.max_speed, 30 m/s by default), against 1 for the others: pull_away_weight where the label
