@@ -382,9 +382,8 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # the route frame against the preset on the real scenes with the guard: behind at 100-200k, ahead or level from 300k to
 # 500k; ends 96.6% / 0.895 (544k) against 89.7% / 0.938 (606k), ensembles 100% / 0.957 against 93.1% / 0.944. Over the
 # two seeds' whole hours its ensembles pass 96.6% and 100% of the real scenes, the preset's 82.8% and 93.1%: in the
-# preset since session 68 (`obs.object_route_frame=false` for the recipe before it). Seed 1's hour with it (session
-# 69): end 96.6% / 0.939, ensemble 100% / 0.963 on the real scenes; seed 0's on a faster VM (537.6k): end 100% / 0.955.
-# Seed 3 on a faster VM still (886.0k, session 70): end 93.1% / 0.917, ensemble 93.1% / 0.941, its 400k checkpoint 100%.
+# preset since session 68 (`obs.object_route_frame=false` for the recipe before it). The preset's hours on every seed
+# since then changed no override: docs/learning.md, ablation rows 85-89.
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm_follow", "algo.student_drive=0.5", "algo.student_mix=episode",
     "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=600000",
