@@ -162,6 +162,27 @@ def test_bc_learns_the_toy_expert():
     assert closed_loop > -0.5  # the expert scores about -0.1, a random policy about -23
 
 
+def test_bc_masked_rows_do_not_change_the_update():
+    """Self-play's replay holds its empty and finished agent slots too (mask 0): whatever labels those rows hold,
+    the update is the one of the real rows alone, and a batch of masked rows only leaves the loss finite."""
+    learner = make_learner("bc", get_config("bc", "debug"), lambda: toy.ToyEncoder(32), toy.ACTION_DIM)
+    state = learner.init(jax.random.key(0), toy.observe(toy.reset(jax.random.key(0), 2)))
+    batch = toy.random_batch(jax.random.key(2), 64)
+    mask = (jnp.arange(64) % 3 != 0).astype(jnp.float32)
+    masked = batch.replace(mask=mask)
+    garbage = masked.replace(expert_action=jnp.where(mask[:, None] > 0, batch.expert_action, -0.99))
+    update = jax.jit(learner.update)
+    first, metrics = update(state, masked, jax.random.key(3))
+    second, metrics_garbage = update(state, garbage, jax.random.key(3))
+    toy.assert_trees_equal(first.policy_params, second.policy_params)
+    assert float(metrics["bc_nll"]) == float(metrics_garbage["bc_nll"])
+    unmasked, _ = update(state, garbage.replace(mask=jnp.ones(64)), jax.random.key(3))  # the labels do count
+    assert not all(bool(jnp.all(a == b)) for a, b in zip(jax.tree.leaves(unmasked.policy_params),
+                                                           jax.tree.leaves(first.policy_params), strict=True))
+    _, empty = update(state, batch.replace(mask=jnp.zeros(64)), jax.random.key(3))
+    assert math.isfinite(float(empty["bc_nll"]))
+
+
 def test_bc_moving_average_is_the_policy_that_acts():
     from vmax_sim.agents.common import ema_weight
     config = get_config("bc", "debug", learning_rate=1e-3, ema_decay=0.99)

@@ -195,12 +195,45 @@ def test_the_selfplay_preset_is_ppo_over_every_controllable_agent():
     assert config_from_dict(config_to_dict(changed)).selfplay == changed.selfplay
     with pytest.raises(ValueError, match="self-play trains with ppo"):
         preset_config("sac-selfplay")
-    with pytest.raises(ValueError, match="trains with ppo, not sac"):
+    with pytest.raises(ValueError, match="trains with ppo or bc, not sac"):
         apply_overrides(preset_config("sac"), ["env.controlled=controllable"])
     with pytest.raises(ValueError, match="selfplay.crashed"):
         apply_overrides(config, ["selfplay.crashed=vanish"])
     with pytest.raises(ValueError, match="selfplay.at_goal"):
         apply_overrides(config, ["selfplay.at_goal=stop"])
+
+
+def test_the_dagger_selfplay_preset_is_bc_over_every_agent_taught_by_idm():
+    config = preset_config("bc-dagger-selfplay")
+    ppo = preset_config("ppo-selfplay")
+    assert config.algo == "bc" and config.is_selfplay and config.agents_per_env == 8
+    assert config.train.teacher == ppo.train.teacher and config.train.teacher_speed_factor == 1.4
+    assert config.selfplay == ppo.selfplay and config.env == ppo.env and config.reward == ppo.reward  # one change
+    assert config.algo_config.student_drive == 0.5 and config.algo_config.student_mix == "episode"
+    assert config.algo_config.num_envs == ppo.algo_config.num_envs
+    assert preset_config("dagger-selfplay") == config
+    with pytest.raises(ValueError, match="dagger trains with bc"):
+        preset_config("ppo-dagger-selfplay")
+    with pytest.raises(ValueError, match="bc needs a rule teacher"):
+        apply_overrides(config, ["train.teacher_speed_factor=1", "train.teacher=log"])
+
+
+@pytest.mark.slow  # ~1 min: a bc-dagger self-play run on 16-object synthetic scenes
+def test_dagger_selfplay_run_keeps_every_agent_row_and_reports_goals(synthetic_shards, tmp_path):
+    config = tiny_config(synthetic_shards, "bc", "env.controlled=controllable", "selfplay.max_agents=4",
+                         "train.teacher=idm", "algo.student_drive=0.5", "algo.student_mix=episode",
+                         "algo.student_after=8", "algo.batch_size=8", "train.total_env_steps=40", "train.chunk_steps=1")
+    lines = []
+    result = train(config, tmp_path / "run", progress=False, print_fn=lines.append)
+    assert result.summary["finished"]
+    rows = config.algo_config.num_envs * 4
+    assert any(f"replay buffer: {config.algo_config.buffer_size:,} transitions" in line for line in lines)
+    with open(tmp_path / "run" / "metrics.csv") as f:
+        first = next(csv.DictReader(f))
+    assert float(first["agent_steps"]) > float(first["env_steps"])  # several agents act in a scene
+    assert float(first["agent_steps"]) <= rows * float(first["env_steps"]) / config.algo_config.num_envs
+    selfplay = result.summary["selfplay_evaluation"]
+    assert selfplay["num_scenes"] == 4 and selfplay["num_agents"] >= 4
 
 
 def test_selfplay_summary_counts_agents_and_scenes():

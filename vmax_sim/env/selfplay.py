@@ -326,9 +326,15 @@ class SelfPlayEnv:
             episode_length=jnp.zeros(shape, jnp.int32), episode_flags={n: jnp.zeros(shape, bool) for n in AGENT_FLAGS},
             next_scenario=jnp.asarray(batch_size % pool_size, jnp.int32), key=key)
 
-    def step(self, state: SelfPlayState, action: jax.Array, pool: SimulatorState
+    @staticmethod
+    def expert_action(state: SelfPlayState) -> jax.Array:
+        """The teacher's label of every agent row now (zeros without a teacher). (B * K, A) in [-1, 1]"""
+        return state.expert_action
+
+    def step(self, state: SelfPlayState, action: jax.Array, pool: SimulatorState, expert: jax.Array | None = None
              ) -> tuple[SelfPlayState, AgentStepOutput]:
-        """Applies actions (B * K, A) in [-1, 1]; finished scenes restart on the next pool scenarios."""
+        """Applies actions (B * K, A) in [-1, 1]; finished scenes restart on the next pool scenarios. `expert`:
+        LearningEnv's argument; the labels here are the state's own (computed with the observation)."""
         batch, k = state.slots.shape
         action = jnp.clip(action, -1.0, 1.0).reshape(batch, k, -1)
         key, step_key = jax.random.split(state.key)

@@ -6,7 +6,8 @@ an encoder (none, mlp, lq, lqh, mtr, wayformer), a reward preset (safety, naviga
 e.g. `sac-lq-navigation` or `paper-sac-lq`; `selfplay` (`ppo-selfplay`) makes one PPO policy drive the SDC and
 the controllable agents of every scene; `dagger` (`bc-dagger`) is behaviour cloning's best recipe measured so far
 (DAGGER_OVERRIDES: a state-based PDM-Closed teacher, whole-episode DAgger, reactive training traffic, route-first
-objects, every step kept, synthetic scenes closer to real ones; docs/learning.md). Overrides name a section and a field:
+objects, every step kept, synthetic scenes closer to real ones; docs/learning.md); `bc-dagger-selfplay` is DAgger's
+learner over self-play's agents (SELFPLAY_DAGGER_OVERRIDES). Overrides name a section and a field:
 `algo.learning_rate=3e-4 network.embed_dim=32 train.total_env_steps=50000 reward.preset=behavior`.
 """
 
@@ -179,8 +180,8 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
             raise ValueError(f"unknown algorithm {self.algo!r}; choose among {', '.join(ALGORITHMS)}")
-        if self.is_selfplay and self.algo != "ppo":
-            raise ValueError(f"self-play (env.controlled=controllable) trains with ppo, not {self.algo}")
+        if self.is_selfplay and self.algo not in SELFPLAY_ALGORITHMS:
+            raise ValueError(f"self-play (env.controlled=controllable) trains with ppo or bc, not {self.algo}")
         if self.is_selfplay and self.train.traffic != "log":
             raise ValueError("train.traffic=idm drives the agents by IDM, self-play (env.controlled=controllable) by "
                              "the policy: choose one")
@@ -195,8 +196,9 @@ class TrainConfig:
             raise ValueError(f"train.teacher_speed_factor sets the idm teacher's pace; train.teacher is "
                              f"{self.train.teacher}")
         if self.is_selfplay and self.imitates and self.train.teacher == "log":
-            raise ValueError("self-play has no log-following labels: algo.imitation_coef > 0 needs a rule teacher "
-                             "(train.teacher=idm, pdm or pdm_state)")
+            what = "bc" if self.algo == "bc" else "algo.imitation_coef > 0"
+            raise ValueError(f"self-play has no log-following labels: {what} needs a rule teacher "
+                             f"(train.teacher=idm, pdm or pdm_state)")
         if self.env.dynamics not in BICYCLE_NAMES and "cautious" in (
                 self.train.ensemble_rule, getattr(self.algo_config, "member_rule", "mean")):
             raise ValueError(f"the cautious member rule takes the smallest acceleration of (acceleration, curvature) "
@@ -303,6 +305,9 @@ def preset_config(name: str = DEFAULT_PRESET) -> TrainConfig:
             raise ValueError(f"unknown preset word {word!r} in {name!r}; use algorithms {', '.join(ALGORITHMS)}, "
                              f"encoders {', '.join(ENCODER_NAMES)}, rewards {', '.join(REWARD_PRESETS)}, paper, "
                              f"selfplay or dagger")
+    if selfplay and dagger:
+        _check_algorithm(name, "bc", "dagger")
+        return selfplay_dagger_config(encoder, reward or SELFPLAY_REWARD)
     if selfplay:
         _check_algorithm(name, "ppo", "self-play")
         return selfplay_config(encoder, reward or SELFPLAY_REWARD, algo_preset)
@@ -407,6 +412,16 @@ def selfplay_config(encoder: str | None, reward: str, algo_preset: str) -> Train
                        selfplay=selfplay)
 
 
+def selfplay_dagger_config(encoder: str | None, reward: str) -> TrainConfig:
+    """The `bc-dagger-selfplay` preset: behaviour cloning over every agent of SELFPLAY_ENVS scenes, its data
+    aggregated DAgger-style (SELFPLAY_DAGGER_OVERRIDES; docs/selfplay.md)."""
+    config = selfplay_config(encoder, reward, "default")
+    network = EncoderConfig(name=encoder or DEFAULT_ENCODER["bc"])
+    config = TrainConfig(algo="bc", algo_preset="default", network=network, env=config.env, reward=config.reward,
+                         train=config.train, selfplay=config.selfplay)
+    return apply_overrides(config, SELFPLAY_DAGGER_OVERRIDES)
+
+
 # scenes stepped at once under self-play: with 8 agent slots each, 64 learner rows (the SDC-only ppo has 16)
 SELFPLAY_ENVS = 8
 # self-play imitates IDM on each agent's own view at 1.4x the speed limit (IDM at the limit reaches 82% of the goals,
@@ -425,6 +440,19 @@ SELFPLAY_AT_GOAL = "drive_on"
 # navigation preset's binary progress, which paid a slow agent as much as one that reaches its goal (30 min:
 # goal-reaching 32% with navigation, 71% with safety + approach; docs/selfplay.md)
 SELFPLAY_REWARD = "safety"
+
+# self-play's algorithms: ppo (the PPO terms plus imitation of the teacher) and bc (the teacher's labels alone, on
+# a replay of every agent's steps)
+SELFPLAY_ALGORITHMS = ("ppo", "bc")
+# `bc-dagger-selfplay`: the SDC recipe's learner (bc-dagger: whole episodes by the student on half the rows, every
+# labelled step kept in a replay buffer) on self-play's scenes, agents and teacher (IDM at 1.4x the limit on each
+# agent's own view). PPO imitates only the rollout it just collected; DAgger keeps the states of every earlier
+# student, labelled. A scene step adds 64 rows (8 scenes x 8 agent slots): the 1M-row buffer (4.9 GB) holds the
+# last ~125k scene steps, about a third of a 30-minute run on 2 cores; checkpoints carry it, so they come every 50k
+SELFPLAY_DAGGER_OVERRIDES = (
+    f"algo.num_envs={SELFPLAY_ENVS}", "algo.student_drive=0.5", "algo.student_mix=episode",
+    "algo.student_after=5000", "algo.updates_per_step=4", "algo.buffer_size=1000000",
+    "train.total_env_steps=1000000", "train.eval_every=25000", "train.checkpoint_every=50000")
 
 
 # per algorithm, what learns best per minute on this CPU (docs/learning.md): the MLP encoder learns as fast as LQ

@@ -64,6 +64,8 @@ def make_learner(config: BCConfig, encoder_factory: EncoderFactory, action_dim: 
             weights = row_weights(batch.obs.sdc, batch.expert_action, config.standing_speed, config.standing_weight,
                                   config.pull_away_accel, config.pull_away_weight, config.braking_accel,
                                   config.braking_weight)
+        # self-play's empty and finished agent slots are buffer rows too (mask 0): they carry no label
+        weights = batch.mask if weights is None else weights * batch.mask
         return bc_loss(actor.apply(params, batch.obs), batch.expert_action, config.nll_weight, config.mse_weight,
                        config.expert_action_eps, weights, config.likelihood)
 

@@ -21,7 +21,8 @@ from vmax_sim.observation.features import observed_sdc_speed
 
 def _mean(values: jax.Array, weights: jax.Array | None) -> jax.Array:
     """values (B,) -> () their mean, weighted by weights (B,) when given."""
-    return jnp.mean(values) if weights is None else jnp.sum(weights * values) / jnp.sum(weights)
+    # a batch of masked rows only (self-play's empty slots) has no mean: 0, not nan
+    return jnp.mean(values) if weights is None else jnp.sum(weights * values) / jnp.maximum(jnp.sum(weights), 1e-6)
 
 
 def nll_loss(dist: D.TanhGaussian, expert_action: jax.Array, eps: float, weights: jax.Array | None = None,
