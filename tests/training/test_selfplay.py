@@ -208,7 +208,7 @@ def test_the_dagger_selfplay_preset_is_bc_over_every_agent_taught_by_idm():
     ppo = preset_config("ppo-selfplay")
     assert config.algo == "bc" and config.is_selfplay and config.agents_per_env == 8
     assert config.train.teacher == ppo.train.teacher and config.train.teacher_speed_factor == 1.4
-    assert config.selfplay == ppo.selfplay and config.env == ppo.env and config.reward == ppo.reward  # one change
+    assert config.selfplay == ppo.selfplay and config.env == ppo.env and config.reward == ppo.reward
     assert config.algo_config.student_drive == 0.5 and config.algo_config.student_mix == "episode"
     assert config.algo_config.num_envs == ppo.algo_config.num_envs
     assert preset_config("dagger-selfplay") == config
