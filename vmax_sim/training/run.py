@@ -400,6 +400,7 @@ def setup_training(config: TrainConfig, train_path: str, print_fn: Callable[[str
     loop, algo_config = config.train, config.algo_config
     env, learner = components(config)
     num_envs = algo_config.num_envs
+    rows = num_envs * config.agents_per_env  # learner rows per env step: one per agent slot under self-play
     mesh = data_mesh(num_envs)
     blocks = mesh.size if mesh else 1
     share = stream_share(loop.pool_size)
@@ -417,9 +418,8 @@ def setup_training(config: TrainConfig, train_path: str, print_fn: Callable[[str
                            env_steps=jnp.zeros((), jnp.int32))
         return jax.tree.map(lambda a: jnp.array(a, copy=True), carry)  # distinct buffers: the chunk donates them
 
-    def fresh_replay():  # one buffer row per learner row: per agent slot under self-play
-        return replay_init(example, algo_config.buffer_size, num_envs * config.agents_per_env, float_dtype,
-                           num_blocks=blocks)
+    def fresh_replay():  # one buffer row per learner row
+        return replay_init(example, algo_config.buffer_size, rows, float_dtype, num_blocks=blocks)
 
     # Shapes first, real arrays after: everything compiles before the scenario stream fills its shuffle buffer
     # and before the replay buffer exists (XLA takes ~1.4 GB to compile the paper's chunk, freed after).
@@ -428,7 +428,6 @@ def setup_training(config: TrainConfig, train_path: str, print_fn: Callable[[str
     carry_abstract = jax.eval_shape(fresh_carry, pool_abstract)
     example = None
     if config.algo in OFF_POLICY:
-        rows = num_envs * config.agents_per_env
         shapes = jax.eval_shape(lambda s, pool: transition_of(env.step(s, jnp.zeros((rows, env.action_dim)),
                                                                        pool)[1]), env_abstract, pool_abstract)
         example = jax.tree.map(lambda a: jnp.zeros(a.shape[1:], a.dtype), shapes)  # one unbatched transition
@@ -455,8 +454,7 @@ def setup_training(config: TrainConfig, train_path: str, print_fn: Callable[[str
     release_freed_memory()  # the host copies of the pool's scenarios
     buffer_mib = 0.0
     if example is not None:
-        total = replay_bytes(example, algo_config.buffer_size, num_envs * config.agents_per_env, float_dtype,
-                             num_blocks=blocks)
+        total = replay_bytes(example, algo_config.buffer_size, rows, float_dtype, num_blocks=blocks)
         buffer_mib = total / 2**20
         print_fn(f"replay buffer: {algo_config.buffer_size:,} transitions x {total / algo_config.buffer_size:,.0f} B "
                  f"= {buffer_mib:,.0f} MiB ({loop.buffer_dtype} observations, each stored once)")
