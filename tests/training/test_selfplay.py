@@ -177,8 +177,10 @@ def test_ppo_imitates_a_teacher_only_when_asked_and_in_any_order():
         apply_overrides(untaught, ["train.teacher=idm"])  # PPO would not read the labels
     with pytest.raises(ValueError, match="rule teacher"):
         apply_overrides(untaught, ["algo.imitation_coef=1.0"])  # self-play has no log labels
-    with pytest.raises(ValueError, match="teacher_speed_factor"):
-        apply_overrides(taught, ["train.teacher=pdm"])  # the pace is the idm teacher's
+    with pytest.raises(ValueError, match="teacher_speed_factor sets the idm teacher's driving"):
+        apply_overrides(taught, ["train.teacher_speed_factor=1.7", "train.teacher=pdm"])  # the pace is idm's
+    swapped = apply_overrides(taught, ["train.teacher=pdm"]).train  # the preset's idm settings go with idm
+    assert (swapped.teacher, swapped.teacher_speed_factor, swapped.teacher_max_accel) == ("pdm", 1.0, None)
 
 
 def test_the_selfplay_preset_is_ppo_over_every_controllable_agent():

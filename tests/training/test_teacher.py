@@ -146,3 +146,23 @@ def test_the_pdm_state_teacher_labels_from_the_state_not_from_the_last_action():
     np.testing.assert_allclose(pdm_state(braked), pdm_state(state), atol=1e-6)
     # and, free of the jerk limit's 0.4 m/s^2 per step, it accelerates toward the limit at once
     assert float(pdm_state(state)[0]) > float(pdm(state)[0]) + 0.05
+
+
+def test_the_idm_teachers_acceleration_is_a_knob_that_reaches_its_labels():
+    """`train.teacher_max_accel` (self-play's preset: 2.5 m/s^2) changes what the idm teacher labels: from rest on
+    a free lane IDM asks for its full acceleration, so the label grows with it (the textbook 1.5 otherwise)."""
+    from vmax_sim.training.run import teacher_of
+
+    textbook = apply_overrides(preset_config("bc-mlp"), ["train.teacher=idm"])
+    brisk = apply_overrides(textbook, ["train.teacher_max_accel=2.5", "train.teacher_bend_lateral_accel=3"])
+    pool = scenarios_to_batch([waiting_scenario()], small_data_config(""))
+    first = []
+    for config in (textbook, brisk):
+        env = LearningEnv(EnvConfig(max_num_objects=8), teacher=teacher_of(config))
+        label = jax.jit(lambda pool, env=env: env.expert_action(env.reset(pool, 1, jax.random.PRNGKey(0))))(pool)
+        first.append(float(label[0, 0]))
+    assert first[0] > 0 and first[1] == pytest.approx(first[0] * 2.5 / 1.5, rel=0.02)
+    with pytest.raises(ValueError, match=r"teacher_max_accel must be in \[0.5, 6\]"):
+        apply_overrides(textbook, ["train.teacher_max_accel=9"])
+    with pytest.raises(ValueError, match="teacher_bend_lateral_accel sets the idm teacher's driving"):
+        apply_overrides(preset_config("bc-mlp"), ["train.teacher=pdm", "train.teacher_bend_lateral_accel=3"])

@@ -37,12 +37,16 @@ def policy_teacher(policy: Policy) -> TeacherFn:
     return teach
 
 
-def idm_teacher(env, speed_factor: float = 1.0) -> TeacherFn:
-    """IDM + pure pursuit along the SDC's route, at `speed_factor` x the lane's speed limit (1: the evaluation's
-    IDM)."""
+def idm_teacher(env, speed_factor: float = 1.0, max_accel: float | None = None,
+                bend_lateral_accel: float | None = None) -> TeacherFn:
+    """IDM + pure pursuit along the SDC's route, at `speed_factor` x the lane's speed limit, accelerating at up to
+    `max_accel` and taking bends at up to `bend_lateral_accel` (m/s^2; None: IDMConfig's). The defaults are the
+    evaluation's IDM."""
     from vmax_sim.policies.idm import IDMConfig, idm_policy
 
-    return policy_teacher(idm_policy(env, IDMConfig(speed_factor=speed_factor)))
+    given = {"max_accel": max_accel, "bend_lateral_accel": bend_lateral_accel}
+    config = IDMConfig(speed_factor=speed_factor, **{name: value for name, value in given.items() if value is not None})
+    return policy_teacher(idm_policy(env, config))
 
 
 def pdm_teacher(env) -> TeacherFn:
