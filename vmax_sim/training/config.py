@@ -462,7 +462,7 @@ SELFPLAY_REWARD = "safety"
 # a replay of every agent's steps)
 SELFPLAY_ALGORITHMS = ("ppo", "bc")
 # `bc-dagger-selfplay`: the SDC recipe's learner (bc-dagger: whole episodes by the student on half the rows, every
-# labelled step kept in a replay buffer) on self-play's scenes, agents and teacher (IDM at 1.4x the limit on each
+# labelled step kept in a replay buffer) on self-play's scenes, agents and teacher (SELFPLAY_TEACHER, on each
 # agent's own view). PPO imitates only the rollout it just collected; DAgger keeps the states of every earlier
 # student, labelled. A scene step adds 64 rows (8 scenes x 8 agent slots): the 1M-row buffer (4,829 MiB) holds the
 # last ~125k scene steps, about a third of a 30-minute run on 2 cores; checkpoints carry it, so they come every 50k
