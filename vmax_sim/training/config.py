@@ -172,8 +172,9 @@ class LoopConfig:
             raise ValueError(f"train.buffer_dtype must be float16, bfloat16 or float32, got {self.buffer_dtype!r}")
 
 
-# the fields that set the idm teacher's driving (meaningful only with train.teacher=idm)
-IDM_TEACHER_FIELDS = ("teacher_speed_factor", "teacher_max_accel", "teacher_bend_lateral_accel")
+# the fields that set the idm teacher's driving (meaningful only with train.teacher=idm), with their defaults
+IDM_TEACHER_DEFAULTS = {name: getattr(LoopConfig, name)
+                        for name in ("teacher_speed_factor", "teacher_max_accel", "teacher_bend_lateral_accel")}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -206,8 +207,8 @@ class TrainConfig:
         if self.train.teacher != "log" and not self.imitates:
             raise ValueError(f"train.teacher labels the steps that bc, bc_sac and ppo with algo.imitation_coef > 0 "
                              f"imitate; {self.algo} imitates nothing here: leave train.teacher=log")
-        for name in IDM_TEACHER_FIELDS:  # here, not in LoopConfig: overrides come in any order
-            if getattr(self.train, name) != getattr(LoopConfig, name) and self.train.teacher != "idm":
+        for name, default in IDM_TEACHER_DEFAULTS.items():  # here, not in LoopConfig: overrides come in any order
+            if getattr(self.train, name) != default and self.train.teacher != "idm":
                 raise ValueError(f"train.{name} sets the idm teacher's driving; train.teacher is {self.train.teacher}")
         if self.is_selfplay and self.imitates and self.train.teacher == "log":
             what = "bc" if self.algo == "bc" else "algo.imitation_coef > 0"
@@ -630,19 +631,18 @@ def _drop_unused_teacher(config: TrainConfig, changes: dict[str, Any], overrides
     algo, algo_config = changes.get("algo", config.algo), changes.get("algo_config", config.algo_config)
     if imitates(algo, algo_config):
         return changes
-    train = changes.get("train", config.train)
-    idm_defaults = {name: getattr(LoopConfig, name) for name in IDM_TEACHER_FIELDS}
-    return {**changes, "train": dataclasses.replace(train, teacher="log", **idm_defaults)}
+    train = changes.get("train", config.train)  # its idm settings go next (_idm_settings_follow_the_teacher)
+    return {**changes, "train": dataclasses.replace(train, teacher="log")}
 
 
 def _idm_settings_follow_the_teacher(changes: dict[str, Any], overrides: Sequence[str]) -> dict[str, Any]:
-    """A preset's idm driving settings (IDM_TEACHER_FIELDS) belong to its idm teacher: `--preset ppo-selfplay
+    """A preset's idm driving settings (IDM_TEACHER_DEFAULTS) belong to its idm teacher: `--preset ppo-selfplay
     train.teacher=pdm` takes them along. The ones the overrides name stay (and meet TrainConfig's check)."""
     train = changes.get("train")
     if train is None or train.teacher == "idm":
         return changes
     named = {item.split("=", 1)[0].strip() for item in overrides}
-    defaults = {name: getattr(LoopConfig, name) for name in IDM_TEACHER_FIELDS if f"train.{name}" not in named}
+    defaults = {name: value for name, value in IDM_TEACHER_DEFAULTS.items() if f"train.{name}" not in named}
     return {**changes, "train": dataclasses.replace(train, **defaults)}
 
 

@@ -48,8 +48,6 @@ from vmax_sim.training import distributed
 from vmax_sim.training.best import SDC_SCORE, SELFPLAY_SCORE, BestCheckpoint
 from vmax_sim.training.checkpoint import CheckpointStore
 from vmax_sim.training.config import (
-    IDM_TEACHER_FIELDS,
-    LoopConfig,
     TrainConfig,
     action_repeat,
     apply_overrides,
@@ -126,13 +124,12 @@ def components(config: TrainConfig):
 
 
 def teacher_of(config: TrainConfig):
-    """The run's teacher factory (`train.teacher`; the idm teacher at `train.teacher_speed_factor` x the limit, with
-    `train.teacher_max_accel` and `train.teacher_bend_lateral_accel` where set); None: the log."""
+    """The run's teacher factory (`train.teacher`; the idm teacher driving by `train.teacher_speed_factor`,
+    `train.teacher_max_accel` and `train.teacher_bend_lateral_accel`); None: the log."""
     train = config.train
-    changed = {name.removeprefix("teacher_"): getattr(train, name) for name in IDM_TEACHER_FIELDS
-               if getattr(train, name) != getattr(LoopConfig, name)}
-    if train.teacher == "idm" and changed:
-        return functools.partial(idm_teacher, **changed)
+    if train.teacher == "idm":
+        return functools.partial(idm_teacher, speed_factor=train.teacher_speed_factor,
+                                 max_accel=train.teacher_max_accel, bend_lateral_accel=train.teacher_bend_lateral_accel)
     return TEACHERS[train.teacher]
 
 
