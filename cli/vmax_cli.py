@@ -226,6 +226,10 @@ def train(preset, data, eval_data, out, resume_dir, quiet, coordinator, num_proc
                                               "(learned traffic).")
 @click.option("--max-agents", type=click.IntRange(1), default=None,
               help="reactive: at most this many agents are driven, nearest the SDC first (default 48).")
+@click.option("--agents-follow-log/--agents-free", "agents_follow_log", default=None,
+              help="reactive: idm, pdm and learned agents never get ahead of their own logged position along their "
+                   "path (the default: they reach junctions no earlier than their logs did), or drive at their own "
+                   "pace (--agents-free).")
 @click.option("--perturb-sigma", type=click.FloatRange(0.0), default=None,
               help="perturbed: standard deviation of the SDC's lateral start offset, m (default 1.0; the heading "
                    "error's is 0.05 rad per m).")
@@ -258,9 +262,9 @@ def train(preset, data, eval_data, out, resume_dir, quiet, coordinator, num_proc
                    "the run says (run: its train.brake_guard_ttc), without it (off: the student alone), or with "
                    "this time-to-collision threshold in seconds (0-10): the same weights with and without it.")
 @_check_options
-def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, num_scenarios, num_objects, seed,
-             as_json, out, quiet, gallery_dir, gallery_max, gallery_passed, difficulty, view_file, view_max,
-             brake_guard_ttc, deep, skip_checks):
+def evaluate(policy, data, mode, agents, max_agents, agents_follow_log, perturb_sigma, batch_size, num_scenarios,
+             num_objects, seed, as_json, out, quiet, gallery_dir, gallery_max, gallery_passed, difficulty, view_file,
+             view_max, brake_guard_ttc, deep, skip_checks):
     """Closed-loop evaluation: accuracy, nuPlan and V-Max scores; several policies give one comparison table."""
     from vmax_sim.evaluation import format_summary
     from vmax_sim.evaluation.evaluate import partial_note
@@ -285,7 +289,7 @@ def evaluate(policy, data, mode, agents, max_agents, perturb_sigma, batch_size, 
         mode_name = mode
         traffic = _learned_traffic(agents)
         mode = parse_mode(mode, agents=agents if traffic is None else "idm", perturb_sigma=perturb_sigma,
-                          max_agents=max_agents, seed=seed)
+                          max_agents=max_agents, seed=seed, agents_follow_log=agents_follow_log)
         if traffic is not None:
             mode = dataclasses.replace(mode, agents="learned", agent_policy=traffic, agent_run=agents)
         entries = split_policies(policy)

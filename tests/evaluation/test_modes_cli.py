@@ -27,12 +27,16 @@ def test_bad_modes_and_options_give_one_line_errors():
     _one_line_error(["--mode", "reactive", "--agents", "zombie"], "unknown agent driver 'zombie'")
     _one_line_error(["--agents", "pdm"], "apply to --mode reactive")
     _one_line_error(["--mode", "reactive", "--perturb-sigma", "2"], "applies to --mode perturbed")
+    _one_line_error(["--agents-free"], "apply to --mode reactive")
+    _one_line_error(["--mode", "reactive", "--agents", "same", "--agents-free"], "with the evaluated policy itself")
 
 
 def test_parse_mode():
     assert parse_mode("reactive", agents="same", max_agents=4) == EvalMode("reactive", agents="same", max_agents=4)
     assert parse_mode("perturbed", perturb_sigma=0.5, seed=3).perturb.sigma == 0.5
     assert parse_mode("perturbed", seed=3).seed == 3
+    assert parse_mode("reactive").agent_follow_log  # the agents keep behind their logs unless told otherwise
+    assert not parse_mode("reactive", agents="pdm", agents_follow_log=False).agent_follow_log
     with pytest.raises(ValueError, match="inside the EvalMode"):
         parse_mode(EvalMode("reactive"), agents="idm")
 

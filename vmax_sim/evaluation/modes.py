@@ -94,7 +94,7 @@ class EvalMode:
     agent_idm: Any = None
     agent_speed: str = "log"  # reactive idm: desired speed = the lane's limit ("limit") or at most the agent's
     # fastest logged speed in the episode ("log", so that it keeps its logged pace when the road is free)
-    # reactive idm / pdm: never get ahead of the agent's own logged position along its path (the log is a
+    # reactive idm / pdm / learned: never get ahead of the agent's own logged position along its path (the log is a
     # virtual leader it may fall behind but not overtake; see docs/evaluation-modes.md)
     agent_follow_log: bool = True
     perturb: PerturbConfig = PerturbConfig()
@@ -135,7 +135,7 @@ class EvalMode:
             if self.agents == "idm":
                 rules["agent_speed"] = self.agent_speed
             if self.agents == "learned":
-                return {"agents": self.agent_run or "learned", "max_agents": self.max_agents}
+                return {"agents": self.agent_run or "learned", "max_agents": self.max_agents, **rules}
             return {"agents": self.agents, "max_agents": self.max_agents, **(rules if self.agents != "same" else {})}
         if self.is_perturbed:
             return {"sigma": self.perturb.sigma, "heading_sigma": self.perturb.heading_sigma_rad,
@@ -146,24 +146,30 @@ class EvalMode:
 
 
 def parse_mode(mode: str | EvalMode = "non_reactive", *, agents: str | None = None,
-               perturb_sigma: float | None = None, max_agents: int | None = None, seed: int = 0) -> EvalMode:
+               perturb_sigma: float | None = None, max_agents: int | None = None, seed: int = 0,
+               agents_follow_log: bool | None = None) -> EvalMode:
     """An `EvalMode` from a name and the command line's options (None: the default).
 
     An `EvalMode` is returned as it is (the options must then be None). Options that do not apply
     to the mode raise ValueError, so a mistyped command does not silently evaluate something else.
     """
     if isinstance(mode, EvalMode):
-        if agents is not None or perturb_sigma is not None or max_agents is not None:
+        if any(option is not None for option in (agents, perturb_sigma, max_agents, agents_follow_log)):
             raise ValueError("pass the options inside the EvalMode, not beside it")
         return mode
     if not isinstance(mode, str):
         raise ValueError(f"an evaluation mode is a name {MODE_NAMES} or an EvalMode, got {type(mode).__name__}")
     result = EvalMode(name=mode, seed=seed)
-    if agents is not None or max_agents is not None:
+    if agents is not None or max_agents is not None or agents_follow_log is not None:
         if not result.is_reactive:
-            raise ValueError(f"--agents / --max-agents apply to --mode reactive, not {mode!r}")
+            raise ValueError(f"--agents / --max-agents / --agents-follow-log apply to --mode reactive, not {mode!r}")
         result = dataclasses.replace(result, agents=agents or result.agents,
-                                     max_agents=result.max_agents if max_agents is None else max_agents)
+                                     max_agents=result.max_agents if max_agents is None else max_agents,
+                                     agent_follow_log=(result.agent_follow_log if agents_follow_log is None
+                                                       else agents_follow_log))
+        if agents_follow_log is not None and result.agents == "same":
+            raise ValueError("--agents-follow-log applies to idm, pdm and learned agents; --agents same drives them "
+                             "with the evaluated policy itself")
     if perturb_sigma is not None:
         if not result.is_perturbed:
             raise ValueError(f"--perturb-sigma applies to --mode perturbed, not {mode!r}")

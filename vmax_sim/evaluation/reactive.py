@@ -76,7 +76,8 @@ def make_agent_fn(mode: EvalMode, env, policy: Policy, metrics_config: MetricsCo
     if mode.agents == "learned":
         agent_policy, agent_params, agent_obs_config = mode.agent_policy
         drive = policy_agent_fn(agent_policy, metrics_config, agent_obs_config)
-        return lambda params, view, key: in_env_units(env, *drive(agent_params, view, key))
+        learned = lambda params, view, key: in_env_units(env, *drive(agent_params, view, key))  # noqa: E731
+        return behind_the_log(env, learned) if mode.agent_follow_log else learned
     return policy_agent_fn(policy, metrics_config, obs_config)
 
 
@@ -86,26 +87,41 @@ def in_env_units(env, action: jax.Array, valid: jax.Array) -> tuple[jax.Array, j
     return (action if env.config.normalize_actions else env.dynamics.denormalize(action)), valid
 
 
+def behind_the_log(env, agent_fn: AgentFn) -> AgentFn:
+    """`agent_fn` (actions in `env`'s convention) kept from overtaking the agent's own log: its acceleration capped
+    by `log_cap_acceleration`, as the IDM agents' (`EvalMode.agent_follow_log`). A learned agent then still brakes,
+    steers and falls behind as it likes, but reaches junctions no earlier than its logged driver did, whose
+    yielding the replayed objects around it were recorded with (docs/selfplay.md: self-play agents that drive faster
+    than their logs run into lane changes and crossings the log had timed)."""
+    from vmax_sim.policies.idm import IDMConfig, check_bicycle, perceive
+
+    check_bicycle(env, "reactive agents' log-following")
+    config, first = IDMConfig(), env.config.first_policy_timestep
+    normalized = env.config.normalize_actions
+
+    def capped(params, view, key):
+        action, valid = agent_fn(params, view, key)
+        physical = env.dynamics.denormalize(action) if normalized else action
+        cap = log_cap_acceleration(view, perceive(view, config, first), config)
+        physical = physical.at[0].set(jnp.minimum(physical[0], cap))
+        return (env.dynamics.normalize(physical) if normalized else physical), valid
+
+    return capped
+
+
 def pdm_agent_fn(env, mode: EvalMode) -> AgentFn:
     """PDM-Closed (default `PDMConfig`) along the agent's own path; with mode.agent_follow_log its
-    acceleration is capped like the IDM agents' (`log_cap_acceleration`)."""
-    from vmax_sim.policies.idm import IDMConfig, as_env_action, check_bicycle, perceive
+    acceleration is capped like the IDM agents' (`behind_the_log`)."""
+    from vmax_sim.policies.idm import as_env_action, check_bicycle
     from vmax_sim.policies.pdm import PDMConfig, pdm_action
 
     check_bicycle(env, "reactive PDM agents'")
-    config, cap_config = PDMConfig(), IDMConfig()
+    config = PDMConfig()
     first = env.config.first_policy_timestep
 
     def agent_fn(params, view, key):
-        action = pdm_action(view, config, first)
-        if mode.agent_follow_log:
-            scene = perceive(view, config.idm, first)
-            # the cap may brake as hard as the vehicle can (6 m/s^2), not only PDM's comfortable 3 m/s^2
-            cap = log_cap_acceleration(view, scene, cap_config)
-            action = action.at[0].set(jnp.minimum(action[0], cap))
-        full = as_env_action(env, view, action)
+        full = as_env_action(env, view, pdm_action(view, config, first))
         slot = sdc_index(view)
         return full.data[slot], full.valid[slot, 0]
 
-    return agent_fn
-
+    return behind_the_log(env, agent_fn) if mode.agent_follow_log else agent_fn
