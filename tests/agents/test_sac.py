@@ -224,3 +224,27 @@ def test_sac_with_a_shared_encoder_learns_the_toy_task():
     params = learner.policy_params(state)
     trained = toy.episode_return(lambda obs, key: learner.act(params, obs, key, True), jax.random.key(1))
     assert trained > -3.0, float(trained)
+
+
+@pytest.mark.parametrize("algo", ["sac", "bc_sac"])
+def test_masked_rows_never_change_the_update(algo):
+    """Self-play's empty and finished agent slots are replay rows with mask 0: whatever they hold, SAC's (and
+    BC+SAC's) update is the one on the agent rows alone."""
+    learner = make_learner(algo, get_config(algo, "debug"), lambda: toy.ToyEncoder(8), 1)
+    batch = toy.random_batch(jax.random.key(0), 16)
+    mask = (jnp.arange(16) < 10).astype(jnp.float32)
+    garbage = toy.random_batch(jax.random.key(1), 16)
+    mixed = jax.tree.map(lambda a, b: jnp.where(mask.reshape((16,) + (1,) * (a.ndim - 1)) > 0, a, b * 5.0),
+                         batch, garbage)
+    state = learner.init(jax.random.key(2), batch.obs)
+    update = jax.jit(learner.update)
+    masked, metrics = update(state, batch.replace(mask=mask), jax.random.key(3))
+    other, other_metrics = update(state, mixed.replace(mask=mask), jax.random.key(3))
+    for name in ("critic_loss", "actor_loss", "alpha_loss"):
+        np.testing.assert_allclose(metrics[name], other_metrics[name], rtol=1e-5, atol=1e-6)
+    jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6),
+                 (masked.actor_params, masked.critic_params, masked.log_alpha),
+                 (other.actor_params, other.critic_params, other.log_alpha))
+    unmasked, _ = update(state, mixed, jax.random.key(3))  # the same rows, all counted: a different update
+    assert any(not np.allclose(a, b) for a, b in zip(jax.tree.leaves(unmasked.critic_params),
+                                                     jax.tree.leaves(masked.critic_params)))

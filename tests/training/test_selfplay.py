@@ -195,10 +195,10 @@ def test_the_selfplay_preset_is_ppo_over_every_controllable_agent():
     assert preset_config("ppo").reward.preset == "navigation" and not preset_config("ppo").is_selfplay
     changed = apply_overrides(config, ["selfplay.max_agents=4", "selfplay.crashed=obstacle"])
     assert config_from_dict(config_to_dict(changed)).selfplay == changed.selfplay
+    with pytest.raises(ValueError, match="names ppo and sac"):
+        preset_config("sac-ppo-selfplay")
     with pytest.raises(ValueError, match="self-play trains with ppo"):
-        preset_config("sac-selfplay")
-    with pytest.raises(ValueError, match="trains with ppo or bc, not sac"):
-        apply_overrides(preset_config("sac"), ["env.controlled=controllable"])
+        preset_config("bc-selfplay")  # behaviour cloning over agents is bc-dagger-selfplay
     with pytest.raises(ValueError, match="selfplay.crashed"):
         apply_overrides(config, ["selfplay.crashed=vanish"])
     with pytest.raises(ValueError, match="selfplay.at_goal"):
@@ -218,6 +218,34 @@ def test_the_dagger_selfplay_preset_is_bc_over_every_agent_taught_by_idm():
         preset_config("ppo-dagger-selfplay")
     with pytest.raises(ValueError, match="bc needs a rule teacher"):
         apply_overrides(config, ["train.teacher_speed_factor=1", "train.teacher=log"])
+
+
+@pytest.mark.slow  # ~1 min each: an off-policy self-play run on 16-object synthetic scenes
+@pytest.mark.parametrize("algo", ["sac", "bc_sac"])
+def test_sac_over_agents_learns_from_every_agent_row_and_reports_goals(synthetic_shards, tmp_path, algo):
+    """`sac-selfplay` / `bc_sac-selfplay`: SAC's updates read the agent rows of a replay of every slot (the losses
+    masked to them: tests/agents/test_sac.py), and the run reports self-play's per-agent evaluation."""
+    teacher = ("train.teacher=idm",) if algo == "bc_sac" else ()
+    config = tiny_config(synthetic_shards, algo, "env.controlled=controllable", "selfplay.max_agents=4",
+                         "algo.batch_size=8", "algo.learning_starts=8", "train.total_env_steps=40",
+                         "train.chunk_steps=1", *teacher)
+    result = train(config, tmp_path / "run", progress=False, print_fn=lambda line: None)
+    assert result.summary["finished"]
+    with open(tmp_path / "run" / "metrics.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert float(rows[0]["agent_steps"]) > float(rows[0]["env_steps"])  # several agents act in a scene
+    learned = [row for row in rows if float(row["updates"]) > 0]
+    assert learned and all(np.isfinite(float(row["learner/critic_loss"])) for row in learned)
+    selfplay = result.summary["selfplay_evaluation"]
+    assert selfplay["num_scenes"] == 4 and selfplay["num_agents"] >= 4
+
+
+def test_off_policy_selfplay_presets():
+    sac, bc_sac = preset_config("sac-selfplay"), preset_config("bc_sac-selfplay")
+    assert (sac.algo, bc_sac.algo) == ("sac", "bc_sac") and sac.is_selfplay and bc_sac.is_selfplay
+    assert sac.train.teacher == "log" and bc_sac.train.teacher == "idm"  # BC+SAC imitates self-play's teacher
+    assert sac.algo_config.num_envs == preset_config("ppo-selfplay").algo_config.num_envs
+    assert sac.algo_config.buffer_size == 400_000  # 64 rows a scene step: SAC's 100k would hold ~1,600 of them
 
 
 @pytest.mark.slow  # ~1 min: a bc-dagger self-play run on 16-object synthetic scenes

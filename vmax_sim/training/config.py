@@ -4,7 +4,7 @@ A preset name joins up to four words with dashes, in any order: an algorithm (sa
 an encoder (none, mlp, lq, lqh, mtr, wayformer), a reward preset (safety, navigation, behavior) and
 `paper` (the algorithm's hyper-parameters from the V-Max paper instead of this machine's defaults),
 e.g. `sac-lq-navigation` or `paper-sac-lq`; `selfplay` (`ppo-selfplay`) makes one PPO policy drive the SDC and
-the controllable agents of every scene; `dagger` (`bc-dagger`) is behaviour cloning's best recipe measured so far
+the controllable agents of every scene (`sac-selfplay`, `bc_sac-selfplay`: SAC, BC+SAC); `dagger` (`bc-dagger`) is behaviour cloning's best recipe measured so far
 (DAGGER_OVERRIDES: a state-based PDM-Closed teacher, whole-episode DAgger, reactive training traffic, route-first
 objects, every step kept, synthetic scenes closer to real ones; docs/learning.md); `bc-dagger-selfplay` is DAgger's
 learner over self-play's agents (SELFPLAY_DAGGER_OVERRIDES). Overrides name a section and a field:
@@ -196,7 +196,8 @@ class TrainConfig:
         if self.algo not in ALGORITHMS:
             raise ValueError(f"unknown algorithm {self.algo!r}; choose among {', '.join(ALGORITHMS)}")
         if self.is_selfplay and self.algo not in SELFPLAY_ALGORITHMS:
-            raise ValueError(f"self-play (env.controlled=controllable) trains with ppo or bc, not {self.algo}")
+            raise ValueError(f"self-play (env.controlled=controllable) trains with {', '.join(SELFPLAY_ALGORITHMS)}, "
+                             f"not {self.algo}")
         if self.is_selfplay and self.train.traffic != "log":
             raise ValueError("train.traffic=idm drives the agents by IDM, self-play (env.controlled=controllable) by "
                              "the policy: choose one")
@@ -303,9 +304,11 @@ def imitates(algo: str, algo_config: Any) -> bool:
 def preset_config(name: str = DEFAULT_PRESET) -> TrainConfig:
     """The TrainConfig of a preset name such as `sac-lq-navigation` (see the module docstring)."""
     algo, encoder, reward, algo_preset, selfplay, dagger = "sac", None, None, "default", False, False
+    named = set()  # the algorithms the name gives
     for word in (w for w in name.lower().split("-") if w):
         if word in ALGORITHMS:
             algo = word
+            named.add(word)
         elif word == "dagger":
             dagger = True
         elif word == "selfplay":  # one shared policy drives the SDC and the controllable agents (ppo)
@@ -323,6 +326,10 @@ def preset_config(name: str = DEFAULT_PRESET) -> TrainConfig:
     if selfplay and dagger:
         _check_algorithm(name, "bc", "dagger")
         return selfplay_dagger_config(encoder, reward or SELFPLAY_REWARD)
+    if selfplay and not dagger and len(named) > 1:
+        raise ValueError(f"self-play trains with one algorithm: {name!r} names {' and '.join(sorted(named))}")
+    if selfplay and named & {"sac", "bc_sac"}:
+        return selfplay_off_policy_config(algo, encoder, reward or SELFPLAY_REWARD)
     if selfplay:
         _check_algorithm(name, "ppo", "self-play")
         return selfplay_config(encoder, reward or SELFPLAY_REWARD, algo_preset)
@@ -427,6 +434,16 @@ def selfplay_config(encoder: str | None, reward: str, algo_preset: str) -> Train
                        selfplay=selfplay)
 
 
+def selfplay_off_policy_config(algo: str, encoder: str | None, reward: str) -> TrainConfig:
+    """The `sac-selfplay` and `bc_sac-selfplay` presets: SAC, or BC+SAC taught by self-play's teacher, over every
+    agent of SELFPLAY_ENVS scenes (SELFPLAY_OFF_POLICY_OVERRIDES; docs/selfplay.md)."""
+    train = LoopConfig(teacher="idm", **SELFPLAY_TEACHER) if algo == "bc_sac" else LoopConfig()
+    config = TrainConfig(algo=algo, algo_preset="default", network=EncoderConfig(name=encoder or DEFAULT_ENCODER[algo]),
+                         env=EnvConfig(controlled="controllable"), reward=RewardConfig(preset=reward), train=train,
+                         selfplay=SelfPlayConfig(at_goal=SELFPLAY_AT_GOAL))
+    return apply_overrides(config, SELFPLAY_OFF_POLICY_OVERRIDES)
+
+
 def selfplay_dagger_config(encoder: str | None, reward: str) -> TrainConfig:
     """The `bc-dagger-selfplay` preset: behaviour cloning over every agent of SELFPLAY_ENVS scenes, its data
     aggregated DAgger-style (SELFPLAY_DAGGER_OVERRIDES; docs/selfplay.md)."""
@@ -459,9 +476,14 @@ SELFPLAY_AT_GOAL = "drive_on"
 # goal-reaching 32% with navigation, 71% with safety + approach; docs/selfplay.md)
 SELFPLAY_REWARD = "safety"
 
-# self-play's algorithms: ppo (the PPO terms plus imitation of the teacher) and bc (the teacher's labels alone, on
-# a replay of every agent's steps)
-SELFPLAY_ALGORITHMS = ("ppo", "bc")
+# self-play's algorithms: ppo (the PPO terms plus imitation of the teacher), bc (the teacher's labels alone, on
+# a replay of every agent's steps), sac and bc_sac (off-policy on that replay, every loss masked to the agent rows)
+SELFPLAY_ALGORITHMS = ("ppo", "bc", "sac", "bc_sac")
+# `sac-selfplay` / `bc_sac-selfplay`: SAC (BC+SAC taught by SELFPLAY_TEACHER) over self-play's scenes and agents. A
+# scene step adds 64 rows (8 scenes x 8 agent slots): SAC's 100k-row buffer would hold ~1,600 scene steps, so the
+# replay holds 400k rows (~2 GB of observations), and the first updates wait for 2,500 scene steps (160k rows)
+SELFPLAY_OFF_POLICY_OVERRIDES = (f"algo.num_envs={SELFPLAY_ENVS}", "algo.buffer_size=400000",
+                                 "algo.learning_starts=2500")
 # `bc-dagger-selfplay`: the SDC recipe's learner (bc-dagger: whole episodes by the student on half the rows, every
 # labelled step kept in a replay buffer) on self-play's scenes, agents and teacher (SELFPLAY_TEACHER, on each
 # agent's own view). PPO imitates only the rollout it just collected; DAgger keeps the states of every earlier

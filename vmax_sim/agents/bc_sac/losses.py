@@ -30,9 +30,9 @@ def make_actor_loss(networks: SACNetworks, sac: SACLosses, config: BCSACConfig) 
     def actor_loss(actor_params: Params, critic_params: Params, alpha: jax.Array, batch: Transition,
                    key: jax.Array, step: jax.Array):
         dist = networks.actor.apply(actor_params, batch.obs)
-        rl_loss, (log_prob, metrics) = sac.actor_from_dist(dist, critic_params, alpha, batch.obs, key)
+        rl_loss, (log_prob, metrics) = sac.actor_from_dist(dist, critic_params, alpha, batch.obs, key, batch.mask)
         imitation, bc_metrics = bc_loss(dist, batch.expert_action, 1.0, config.bc_mse_weight,
-                                        config.expert_action_eps)
+                                        config.expert_action_eps, batch.mask)
         weight = bc_weight_at(step, config.bc_every, config.bc_weight)
         loss = rl_loss + weight * imitation
         return loss, (log_prob, {**metrics, **bc_metrics, "bc_weight": weight, "actor_total_loss": scalar(loss)})

@@ -84,10 +84,10 @@ def build_learner(config: SACConfig, networks: SACNetworks,
 
         if config.learn_alpha:
             alpha_loss, grads = jax.value_and_grad(sac_losses.temperature_loss)(state.log_alpha, log_prob,
-                                                                                 target_entropy)
+                                                                                 target_entropy, batch.mask)
             log_alpha, alpha_opt_state = apply_gradients(alpha_opt, grads, state.alpha_opt_state, state.log_alpha)
         else:
-            alpha_loss = sac_losses.temperature_loss(state.log_alpha, log_prob, target_entropy)
+            alpha_loss = sac_losses.temperature_loss(state.log_alpha, log_prob, target_entropy, batch.mask)
             log_alpha, alpha_opt_state = state.log_alpha, state.alpha_opt_state
 
         new_state = SACTrainState(

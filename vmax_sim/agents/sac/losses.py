@@ -5,6 +5,9 @@ Shapes: B batch, A action dim, N Q heads.
     L_Q    = 1/2 * sum_i mean_B (Q_i(s, a) - y)^2                       (y held constant)
     L_pi   = mean_B (alpha * log pi(a~|s) - min_i Q_i(s, a~)),  a~ ~ pi(.|s) reparameterised
     L_alpha = -log(alpha) * mean_B (log pi(a~|s) + target_entropy)     (log pi held constant)
+
+With row weights w (B,) (`Transition.mask`: self-play's empty and finished agent slots weigh 0) every mean_B is the
+weighted one, sum_B w * x / sum_B w.
 """
 
 from __future__ import annotations
@@ -30,20 +33,30 @@ def soft_td_target(reward: jax.Array, discount: jax.Array, next_q: jax.Array, ne
     return reward_scale * reward + gamma * discount * soft_value
 
 
-def critic_loss(q: jax.Array, target: jax.Array) -> jax.Array:
-    """1/2 sum over heads of the mean squared TD error: q (N, B), target (B,) -> ()."""
-    return 0.5 * jnp.sum(jnp.mean(jnp.square(q - target[None]), axis=-1))
+def _mean(values: jax.Array, weights: jax.Array | None) -> jax.Array:
+    """values (..., B) -> (...) their mean over B, weighted by weights (B,) when given (a batch of masked rows only
+    has no mean: 0, not nan)."""
+    if weights is None:
+        return jnp.mean(values, axis=-1)
+    return jnp.sum(weights * values, axis=-1) / jnp.maximum(jnp.sum(weights), 1e-6)
 
 
-def actor_loss(q: jax.Array, log_prob: jax.Array, alpha: jax.Array | float) -> jax.Array:
-    """mean(alpha * log pi - min_i Q_i): q (N, B), log_prob (B,) -> ()."""
-    return jnp.mean(alpha * log_prob - jnp.min(q, axis=0))
+def critic_loss(q: jax.Array, target: jax.Array, weights: jax.Array | None = None) -> jax.Array:
+    """1/2 sum over heads of the mean squared TD error: q (N, B), target (B,), weights (B,) or None -> ()."""
+    return 0.5 * jnp.sum(_mean(jnp.square(q - target[None]), weights))
 
 
-def temperature_loss(log_alpha: jax.Array, log_prob: jax.Array, target_entropy: float) -> jax.Array:
-    """-log_alpha * mean(log pi + target_entropy): () , (B,) -> (). Raises alpha when the policy's entropy
-    (-log pi) is below the target."""
-    return -log_alpha * jnp.mean(jax.lax.stop_gradient(log_prob) + target_entropy)
+def actor_loss(q: jax.Array, log_prob: jax.Array, alpha: jax.Array | float,
+               weights: jax.Array | None = None) -> jax.Array:
+    """mean(alpha * log pi - min_i Q_i): q (N, B), log_prob (B,), weights (B,) or None -> ()."""
+    return _mean(alpha * log_prob - jnp.min(q, axis=0), weights)
+
+
+def temperature_loss(log_alpha: jax.Array, log_prob: jax.Array, target_entropy: float,
+                     weights: jax.Array | None = None) -> jax.Array:
+    """-log_alpha * mean(log pi + target_entropy): (), (B,), weights (B,) or None -> (). Raises alpha when the
+    policy's entropy (-log pi) is below the target."""
+    return -log_alpha * _mean(jax.lax.stop_gradient(log_prob) + target_entropy, weights)
 
 
 class SACLosses(NamedTuple):
@@ -54,8 +67,8 @@ class SACLosses(NamedTuple):
     critic: Callable[..., tuple[jax.Array, tuple[Metrics, object]]]
     # (actor_params, critic_params, alpha, batch, key) -> (loss, (log_prob (B,), metrics))
     actor: Callable[..., tuple[jax.Array, tuple[jax.Array, Metrics]]]
-    # (dist, critic_params, alpha, actor_input, key) -> (loss, (log_prob (B,), metrics)): the actor loss once the
-    # policy distribution on obs is known (BC+SAC adds its imitation term to the same forward pass)
+    # (dist, critic_params, alpha, actor_input, key, weights) -> (loss, (log_prob (B,), metrics)): the actor loss
+    # once the policy distribution on obs is known (BC+SAC adds its imitation term to the same forward pass)
     actor_from_dist: Callable[..., tuple[jax.Array, tuple[jax.Array, Metrics]]]
 
 
@@ -76,19 +89,21 @@ def make_losses(networks: SACNetworks, config: SACConfig) -> SACLosses:
         else:
             q = networks.critic.apply(critic_params, batch.obs, batch.action)  # (N, B)
             actor_input = batch.obs
-        loss = critic_loss(q, target)
+        loss = critic_loss(q, target, batch.mask)
         return loss, ({"critic_loss": scalar(loss), "q_mean": scalar(jnp.mean(q)),
                        "target_q_mean": scalar(jnp.mean(target))}, actor_input)
 
-    def actor_from_dist(dist: D.TanhGaussian, critic_params: Params, alpha: jax.Array, obs, key: jax.Array):
+    def actor_from_dist(dist: D.TanhGaussian, critic_params: Params, alpha: jax.Array, obs, key: jax.Array,
+                        weights: jax.Array | None = None):
         action, log_prob = D.sample_and_log_prob(dist, key)
         q = networks.q_of_input(critic_params, obs, action)
-        loss = actor_loss(q, log_prob, alpha)
+        loss = actor_loss(q, log_prob, alpha, weights)
         metrics = {"actor_loss": scalar(loss), "entropy": scalar(-jnp.mean(log_prob)),
                    "policy_std": scalar(jnp.mean(jnp.exp(dist.log_std)))}
         return loss, (log_prob, metrics)
 
     def actor(actor_params: Params, critic_params: Params, alpha: jax.Array, batch: Transition, key: jax.Array):
-        return actor_from_dist(networks.actor.apply(actor_params, batch.obs), critic_params, alpha, batch.obs, key)
+        return actor_from_dist(networks.actor.apply(actor_params, batch.obs), critic_params, alpha, batch.obs, key,
+                               batch.mask)
 
     return SACLosses(critic=critic, actor=actor, actor_from_dist=actor_from_dist)
