@@ -4,10 +4,10 @@ A preset name joins up to four words with dashes, in any order: an algorithm (sa
 an encoder (none, mlp, lq, lqh, mtr, wayformer), a reward preset (safety, navigation, behavior) and
 `paper` (the algorithm's hyper-parameters from the V-Max paper instead of this machine's defaults),
 e.g. `sac-lq-navigation` or `paper-sac-lq`; `selfplay` (`ppo-selfplay`) makes one PPO policy drive the SDC and
-the controllable agents of every scene (`sac-selfplay`, `bc_sac-selfplay`: SAC, BC+SAC); `dagger` (`bc-dagger`) is behaviour cloning's best recipe measured so far
-(DAGGER_OVERRIDES: a state-based PDM-Closed teacher, whole-episode DAgger, reactive training traffic, route-first
-objects, every step kept, synthetic scenes closer to real ones; docs/learning.md); `bc-dagger-selfplay` is DAgger's
-learner over self-play's agents (SELFPLAY_DAGGER_OVERRIDES). Overrides name a section and a field:
+the controllable agents of every scene (`sac-selfplay`, `bc_sac-selfplay`: SAC, BC+SAC); `dagger` (`bc-dagger`) is
+behaviour cloning's best recipe measured so far (DAGGER_OVERRIDES: a state-based PDM-Closed teacher, whole-episode
+DAgger, reactive training traffic, route-first objects, every step kept, synthetic scenes closer to real ones;
+docs/learning.md); `bc-dagger-selfplay` is DAgger's learner over self-play's agents (SELFPLAY_DAGGER_OVERRIDES). Overrides name a section and a field:
 `algo.learning_rate=3e-4 network.embed_dim=32 train.total_env_steps=50000 reward.preset=behavior`.
 """
 
