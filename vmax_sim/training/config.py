@@ -8,7 +8,8 @@ the controllable agents of every scene (`sac-selfplay`, `bc_sac-selfplay`: SAC, 
 behaviour cloning's best recipe measured so far (DAGGER_OVERRIDES: a state-based PDM-Closed teacher, whole-episode
 DAgger, reactive training traffic, route-first objects, every step kept, synthetic scenes closer to real ones;
 docs/learning.md); `bc-dagger-selfplay` is DAgger's learner over self-play's agents (SELFPLAY_DAGGER_OVERRIDES).
-Overrides name a section and a field: `algo.learning_rate=3e-4 network.embed_dim=32 train.total_env_steps=50000 reward.preset=behavior`.
+Overrides name a section and a field:
+`algo.learning_rate=3e-4 network.embed_dim=32 train.total_env_steps=50000 reward.preset=behavior`.
 """
 
 from __future__ import annotations
