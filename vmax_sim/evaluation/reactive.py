@@ -76,7 +76,10 @@ def make_agent_fn(mode: EvalMode, env, policy: Policy, metrics_config: MetricsCo
     if mode.agents == "learned":
         agent_policy, agent_params, agent_obs_config = mode.agent_policy
         drive = policy_agent_fn(agent_policy, metrics_config, agent_obs_config)
-        learned = lambda params, view, key: in_env_units(env, *drive(agent_params, view, key))  # noqa: E731
+
+        def learned(params, view, key):  # the traffic's own weights, whatever the evaluated policy's
+            return in_env_units(env, *drive(agent_params, view, key))
+
         return behind_the_log(env, learned) if mode.agent_follow_log else learned
     return policy_agent_fn(policy, metrics_config, obs_config)
 
