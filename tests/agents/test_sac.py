@@ -229,7 +229,7 @@ def test_sac_with_a_shared_encoder_learns_the_toy_task():
 @pytest.mark.parametrize("algo", ["sac", "bc_sac"])
 def test_masked_rows_never_change_the_update(algo):
     """Self-play's empty and finished agent slots are replay rows with mask 0: whatever they hold, SAC's (and
-    BC+SAC's) update is the one on the agent rows alone."""
+    BC+SAC's) update is the one on the agent rows alone, and so are the logged Q, entropy and std."""
     learner = make_learner(algo, get_config(algo, "debug"), lambda: toy.ToyEncoder(8), 1)
     batch = toy.random_batch(jax.random.key(0), 16)
     mask = (jnp.arange(16) < 10).astype(jnp.float32)
@@ -240,8 +240,8 @@ def test_masked_rows_never_change_the_update(algo):
     update = jax.jit(learner.update)
     masked, metrics = update(state, batch.replace(mask=mask), jax.random.key(3))
     other, other_metrics = update(state, mixed.replace(mask=mask), jax.random.key(3))
-    for name in ("critic_loss", "actor_loss", "alpha_loss"):
-        np.testing.assert_allclose(metrics[name], other_metrics[name], rtol=1e-5, atol=1e-6)
+    for name in ("critic_loss", "actor_loss", "alpha_loss", "q_mean", "target_q_mean", "entropy", "policy_std"):
+        np.testing.assert_allclose(metrics[name], other_metrics[name], rtol=1e-5, atol=1e-6, err_msg=name)
     jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6),
                  (masked.actor_params, masked.critic_params, masked.log_alpha),
                  (other.actor_params, other.critic_params, other.log_alpha))

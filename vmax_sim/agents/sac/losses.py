@@ -90,16 +90,17 @@ def make_losses(networks: SACNetworks, config: SACConfig) -> SACLosses:
             q = networks.critic.apply(critic_params, batch.obs, batch.action)  # (N, B)
             actor_input = batch.obs
         loss = critic_loss(q, target, batch.mask)
-        return loss, ({"critic_loss": scalar(loss), "q_mean": scalar(jnp.mean(q)),
-                       "target_q_mean": scalar(jnp.mean(target))}, actor_input)
+        # the logged means, as the losses, over the agent rows only
+        return loss, ({"critic_loss": scalar(loss), "q_mean": scalar(jnp.mean(_mean(q, batch.mask))),
+                       "target_q_mean": scalar(_mean(target, batch.mask))}, actor_input)
 
     def actor_from_dist(dist: D.TanhGaussian, critic_params: Params, alpha: jax.Array, obs, key: jax.Array,
                         weights: jax.Array | None = None):
         action, log_prob = D.sample_and_log_prob(dist, key)
         q = networks.q_of_input(critic_params, obs, action)
         loss = actor_loss(q, log_prob, alpha, weights)
-        metrics = {"actor_loss": scalar(loss), "entropy": scalar(-jnp.mean(log_prob)),
-                   "policy_std": scalar(jnp.mean(jnp.exp(dist.log_std)))}
+        metrics = {"actor_loss": scalar(loss), "entropy": scalar(-_mean(log_prob, weights)),
+                   "policy_std": scalar(_mean(jnp.mean(jnp.exp(dist.log_std), axis=-1), weights))}
         return loss, (log_prob, metrics)
 
     def actor(actor_params: Params, critic_params: Params, alpha: jax.Array, batch: Transition, key: jax.Array):
