@@ -54,6 +54,14 @@ def global_norm(tree: Params) -> jax.Array:
     return jnp.sqrt(sum(jnp.sum(jnp.square(x)) for x in jax.tree.leaves(tree)))
 
 
+def row_mean(values: jax.Array, weights: jax.Array | None) -> jax.Array:
+    """values (..., B) -> (...) their mean over the batch rows B, weighted by weights (B,) when given (self-play's
+    empty and finished agent slots weigh 0; a batch of such rows only has no mean: 0, not nan)."""
+    if weights is None:
+        return jnp.mean(values, axis=-1)
+    return jnp.sum(weights * values, axis=-1) / jnp.maximum(jnp.sum(weights), 1e-6)
+
+
 def scalar(x) -> jax.Array:
     """A () float32 metric."""
     return jnp.asarray(x, jnp.float32).reshape(())

@@ -14,27 +14,21 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.agents import distributions as D
-from vmax_sim.agents.common import scalar
+from vmax_sim.agents.common import row_mean, scalar
 from vmax_sim.agents.types import Metrics
 from vmax_sim.observation.features import observed_sdc_speed
-
-
-def _mean(values: jax.Array, weights: jax.Array | None) -> jax.Array:
-    """values (B,) -> () their mean, weighted by weights (B,) when given."""
-    # a batch of masked rows only (self-play's empty slots) has no mean: 0, not nan
-    return jnp.mean(values) if weights is None else jnp.sum(weights * values) / jnp.maximum(jnp.sum(weights), 1e-6)
 
 
 def nll_loss(dist: D.TanhGaussian, expert_action: jax.Array, eps: float, weights: jax.Array | None = None,
              likelihood: str = "gaussian") -> jax.Array:
     """mean_B -log pi(a_E | s): dist (B, A), expert_action (B, A), weights (B,) or None -> (). likelihood: the
     pre-tanh family (distributions.PRE_TANH_LOG_PROBS)."""
-    return -_mean(D.log_prob(dist, expert_action, eps, likelihood), weights)
+    return -row_mean(D.log_prob(dist, expert_action, eps, likelihood), weights)
 
 
 def mode_mse_loss(dist: D.TanhGaussian, expert_action: jax.Array, weights: jax.Array | None = None) -> jax.Array:
     """mean_B sum_A (tanh(loc) - a_E)^2: -> ()."""
-    return _mean(jnp.sum(jnp.square(D.mode(dist) - expert_action), axis=-1), weights)
+    return row_mean(jnp.sum(jnp.square(D.mode(dist) - expert_action), axis=-1), weights)
 
 
 def bc_loss(dist: D.TanhGaussian, expert_action: jax.Array, nll_weight: float = 1.0, mse_weight: float = 0.0,
@@ -45,7 +39,7 @@ def bc_loss(dist: D.TanhGaussian, expert_action: jax.Array, nll_weight: float = 
     mse = mode_mse_loss(dist, expert_action, weights)
     loss = nll_weight * nll + mse_weight * mse
     metrics = {"bc_loss": scalar(loss), "bc_nll": scalar(nll), "bc_mse": scalar(mse),
-               "bc_mae": scalar(_mean(jnp.mean(jnp.abs(D.mode(dist) - expert_action), axis=-1), weights))}
+               "bc_mae": scalar(row_mean(jnp.mean(jnp.abs(D.mode(dist) - expert_action), axis=-1), weights))}
     return loss, metrics
 
 

@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 
 from vmax_sim.agents import distributions as D
-from vmax_sim.agents.common import scalar
+from vmax_sim.agents.common import row_mean, scalar
 from vmax_sim.agents.sac.config import SACConfig
 from vmax_sim.agents.sac.networks import SACNetworks
 from vmax_sim.agents.types import Metrics, Params, Transition
@@ -33,30 +33,22 @@ def soft_td_target(reward: jax.Array, discount: jax.Array, next_q: jax.Array, ne
     return reward_scale * reward + gamma * discount * soft_value
 
 
-def _mean(values: jax.Array, weights: jax.Array | None) -> jax.Array:
-    """values (..., B) -> (...) their mean over B, weighted by weights (B,) when given (a batch of masked rows only
-    has no mean: 0, not nan)."""
-    if weights is None:
-        return jnp.mean(values, axis=-1)
-    return jnp.sum(weights * values, axis=-1) / jnp.maximum(jnp.sum(weights), 1e-6)
-
-
 def critic_loss(q: jax.Array, target: jax.Array, weights: jax.Array | None = None) -> jax.Array:
     """1/2 sum over heads of the mean squared TD error: q (N, B), target (B,), weights (B,) or None -> ()."""
-    return 0.5 * jnp.sum(_mean(jnp.square(q - target[None]), weights))
+    return 0.5 * jnp.sum(row_mean(jnp.square(q - target[None]), weights))
 
 
 def actor_loss(q: jax.Array, log_prob: jax.Array, alpha: jax.Array | float,
                weights: jax.Array | None = None) -> jax.Array:
     """mean(alpha * log pi - min_i Q_i): q (N, B), log_prob (B,), weights (B,) or None -> ()."""
-    return _mean(alpha * log_prob - jnp.min(q, axis=0), weights)
+    return row_mean(alpha * log_prob - jnp.min(q, axis=0), weights)
 
 
 def temperature_loss(log_alpha: jax.Array, log_prob: jax.Array, target_entropy: float,
                      weights: jax.Array | None = None) -> jax.Array:
     """-log_alpha * mean(log pi + target_entropy): (), (B,), weights (B,) or None -> (). Raises alpha when the
     policy's entropy (-log pi) is below the target."""
-    return -log_alpha * _mean(jax.lax.stop_gradient(log_prob) + target_entropy, weights)
+    return -log_alpha * row_mean(jax.lax.stop_gradient(log_prob) + target_entropy, weights)
 
 
 class SACLosses(NamedTuple):
@@ -91,16 +83,16 @@ def make_losses(networks: SACNetworks, config: SACConfig) -> SACLosses:
             actor_input = batch.obs
         loss = critic_loss(q, target, batch.mask)
         # the logged means, as the losses, over the agent rows only
-        return loss, ({"critic_loss": scalar(loss), "q_mean": scalar(jnp.mean(_mean(q, batch.mask))),
-                       "target_q_mean": scalar(_mean(target, batch.mask))}, actor_input)
+        return loss, ({"critic_loss": scalar(loss), "q_mean": scalar(jnp.mean(row_mean(q, batch.mask))),
+                       "target_q_mean": scalar(row_mean(target, batch.mask))}, actor_input)
 
     def actor_from_dist(dist: D.TanhGaussian, critic_params: Params, alpha: jax.Array, obs, key: jax.Array,
                         weights: jax.Array | None = None):
         action, log_prob = D.sample_and_log_prob(dist, key)
         q = networks.q_of_input(critic_params, obs, action)
         loss = actor_loss(q, log_prob, alpha, weights)
-        metrics = {"actor_loss": scalar(loss), "entropy": scalar(-_mean(log_prob, weights)),
-                   "policy_std": scalar(_mean(jnp.mean(jnp.exp(dist.log_std), axis=-1), weights))}
+        metrics = {"actor_loss": scalar(loss), "entropy": scalar(-row_mean(log_prob, weights)),
+                   "policy_std": scalar(row_mean(jnp.mean(jnp.exp(dist.log_std), axis=-1), weights))}
         return loss, (log_prob, metrics)
 
     def actor(actor_params: Params, critic_params: Params, alpha: jax.Array, batch: Transition, key: jax.Array):
