@@ -112,25 +112,29 @@ def _neighbor_pairs(lanes: Lanes, edge_xy: np.ndarray, settings: LaneGraphSettin
     sample_lane = lanes.point_lane[samples]
     sample_xy = lanes.points[samples, :2]
     sample_dir = lanes.point_tangent[samples]
-    # Coarse index over the samples themselves (every 2 m): few candidates per query.
-    tree = cKDTree(sample_xy)
-    num_neighbors = min(32, len(samples))
-    dist, idx = tree.query(sample_xy, k=num_neighbors, distance_upper_bound=settings.neighbor_max_m + 1.0)
-    dist, idx = np.atleast_2d(dist), np.atleast_2d(idx)
-    found = np.flatnonzero(np.isfinite(dist))  # row-major, as np.nonzero's (row, column) pairs
-    rows, other = found // dist.shape[1], idx.ravel()[found]
-    keep = sample_lane[other] != sample_lane[rows]
-    rows, other = rows[keep], other[keep]
+    # Every pair of samples (every 2 m) within reach, each once (i < j): only the pairs that exist, where a fixed
+    # k nearest per sample mostly returned padding (and, in dense junctions, cut real neighbours off).
+    near = cKDTree(sample_xy).query_pairs(settings.neighbor_max_m + 1.0, output_type="ndarray")  # (p, 2)
+    x, y = sample_xy[:, 0].copy(), sample_xy[:, 1].copy()  # (s,) each: 1-D gathers cost less than (s, 2) rows
+    dir_x, dir_y = sample_dir[:, 0].copy(), sample_dir[:, 1].copy()
+    a, b = near[:, 0], near[:, 1]
+    # The tests that read both samples alike, on each unordered pair once: another lane, headings close.
+    alike = ((sample_lane[a] != sample_lane[b])
+             & (dir_x[a] * dir_x[b] + dir_y[a] * dir_y[b] > np.cos(np.radians(settings.neighbor_heading_deg))))
+    a, b = a[alike], b[alike]
+    rows, other = np.concatenate([a, b]), np.concatenate([b, a])  # both ways round
     # Exact lateral distance to the other lane: project onto the other sample's tangent line.
-    offset = sample_xy[other] - sample_xy[rows]
-    other_dir = sample_dir[other]  # gathered once: the three tests below read it
-    lateral = np.abs(offset[:, 0] * other_dir[:, 1] - offset[:, 1] * other_dir[:, 0])
-    along = np.abs((offset * other_dir).sum(-1))
-    cos_heading = (sample_dir[rows] * other_dir).sum(-1)
+    offset_x, offset_y = x[other] - x[rows], y[other] - y[rows]
+    other_x, other_y = dir_x[other], dir_y[other]
+    lateral = np.abs(offset_x * other_y - offset_y * other_x)
+    along = np.abs(offset_x * other_x + offset_y * other_y)
     ok = ((lateral >= settings.neighbor_min_m) & (lateral <= settings.neighbor_max_m)
-          & (along <= settings.neighbor_sample_spacing_m)
-          & (cos_heading > np.cos(np.radians(settings.neighbor_heading_deg))))
+          & (along <= settings.neighbor_sample_spacing_m))
+    offset = np.stack([offset_x, offset_y], 1)  # (q, 2)
     rows, other, offset = rows[ok], other[ok], offset[ok]
+    # Per sample, nearest first: the nearest sample of each neighbour lane casts that sample's vote below.
+    order = np.lexsort((np.hypot(offset[:, 0], offset[:, 1]), rows))
+    rows, other, offset = rows[order], other[order], offset[order]
     if len(edge_xy) and len(rows):
         midpoints = sample_xy[rows] + 0.5 * offset
         # Clear: no edge point within edge_clearance_m. The search stops at the clearance (an edge point at exactly

@@ -58,6 +58,20 @@ def test_parallel_lanes_are_left_and_right_neighbours_unless_an_edge_separates_t
     assert list(arrays["lane_left_neighbors"][row]) == [2, -1, -1, -1]
 
 
+def test_short_parallel_lanes_inside_a_dense_junction_are_still_neighbours():
+    # Two 6 m lanes 3.5 m apart under 25 crossing lanes (a crosswalk-dense junction): each of their samples has
+    # more than 32 samples of other lanes nearer than its neighbour; every one within reach is still considered.
+    crossing = [MapPolyline(100 + k, LANE, line((0.25 * k, -4.0), (0.25 * k, 8.0))) for k in range(25)]
+    polylines = [MapPolyline(1, LANE, line((0, 0), (6, 0))), MapPolyline(2, LANE, line((0, 3.5), (6, 3.5))),
+                 *crossing]
+    scenario = make_scenario(polylines, [track(straight_xy(0, 5))])
+    lanes = extract_lanes(scenario)
+    graph = rebuild_lane_graph(lanes)
+    assert _ids(lanes, graph.left[lanes.index_of[1]]) == [2]
+    assert _ids(lanes, graph.right[lanes.index_of[2]]) == [1]
+    assert _ids(lanes, graph.left[lanes.index_of[100]]) == []  # crossing lanes 0.25 m apart: too near
+
+
 def test_an_edge_exactly_at_the_clearance_from_the_lanes_midline_still_separates_them():
     def neighbours(edge_y):  # lanes at y = 0 and 3.5 (midline 1.75), a road edge along y = edge_y, same x points
         polylines = [MapPolyline(1, LANE, line((0, 0), (98, 0))), MapPolyline(2, LANE, line((0, 3.5), (98, 3.5))),
