@@ -130,8 +130,7 @@ def _neighbor_pairs(lanes: Lanes, edge_xy: np.ndarray, settings: LaneGraphSettin
     along = np.abs(offset_x * other_x + offset_y * other_y)
     ok = ((lateral >= settings.neighbor_min_m) & (lateral <= settings.neighbor_max_m)
           & (along <= settings.neighbor_sample_spacing_m))
-    offset = np.stack([offset_x, offset_y], 1)  # (q, 2)
-    rows, other, offset = rows[ok], other[ok], offset[ok]
+    rows, other, offset = rows[ok], other[ok], np.stack([offset_x[ok], offset_y[ok]], 1)  # offset (q, 2)
     # Per sample, nearest first: the nearest sample of each neighbour lane casts that sample's vote below.
     order = np.lexsort((np.hypot(offset[:, 0], offset[:, 1]), rows))
     rows, other, offset = rows[order], other[order], offset[order]
