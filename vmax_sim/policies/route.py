@@ -323,10 +323,15 @@ def path_conflict(path: RoutePath, objects: Objects, ego: Ego, start_arc: jax.Ar
     """
     zone_xy, _ = point_at(path, start_arc + jnp.linspace(0.0, zone_length, num_zone_points))  # (Z, 2)
     times = jnp.linspace(0.0, horizon, num_times)  # (H,)
-    future = objects.boxes[:, None, :2] + objects.vel[:, None] * times[None, :, None]  # (N, H, 2)
-    gap = jnp.linalg.norm(future[:, :, None] - zone_xy[None, None], axis=-1)  # (N, H, Z)
+    # x and y apart, squared distances and their minimum before the test: a trailing 2-wide axis, a square root
+    # per (object, time, zone point) and a boolean reduction over two axes made this the costliest part of IDM's
+    # step on a CPU (~100 us of ~160 per agent view; now ~20)
+    future_x = objects.boxes[:, 0:1] + objects.vel[:, 0:1] * times  # (N, H)
+    future_y = objects.boxes[:, 1:2] + objects.vel[:, 1:2] * times
+    gap_sq = ((future_x[:, :, None] - zone_xy[:, 0]) ** 2
+              + (future_y[:, :, None] - zone_xy[:, 1]) ** 2)  # (N, H, Z)
     reach = lane_half_width + 0.5 * objects.boxes[:, 3]  # (N,)
-    hits = jnp.any(gap < reach[:, None, None], axis=(1, 2))  # (N,)
+    hits = jnp.min(gap_sq.reshape(gap_sq.shape[0], -1), axis=1) < reach * reach  # (N,)
     heading = jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
     speed = jnp.linalg.norm(objects.vel, axis=-1)
     behind = (objects.boxes[:, :2] - ego.xy) @ heading < 0.0
