@@ -1,0 +1,116 @@
+"""Cost of the rule drivers on every agent's view, and of the self-play step with and without its teacher:
+`python benchmarks/rule_drivers.py [--scenes 8] [--agents 8] [--steps 32]`.
+
+Self-play's teacher (IDM at 1.4x the limit) and IDM / PDM traffic run once per agent and step on the agent's own
+view (`vmax_sim.env.agent_view`), so their cost per view multiplies by the agent slots. Times the jitted IDM and
+PDM-Closed actions over scenes x agents views, and `SelfPlayEnv.step` (zero actions, a `lax.scan` of --steps) of the
+`ppo-selfplay` preset with its teacher and without it. Medians of timed runs after a warm-up; figures go to
+docs/benchmarks.md with the machine. To time another tree: PYTHONPATH=/path/to/tree python benchmarks/...
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+
+
+def _median_seconds(fn, *args, repeats: int) -> float:
+    import jax
+
+    jax.block_until_ready(fn(*args))  # compile
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def _selfplay_setup(scenes: int, agents: int, with_teacher: bool):
+    from vmax_sim.training import apply_overrides, preset_config
+    from vmax_sim.training.run import resolve_data, setup_training
+
+    overrides = ["train.pool_size=32", "train.action_repeat=1", f"algo.num_envs={scenes}",
+                 f"selfplay.max_agents={agents}"]
+    if not with_teacher:  # the preset's PPO without the imitation term (no labels to compute)
+        overrides += ["algo.imitation_coef=0", "train.teacher=log", "train.teacher_speed_factor=1.0",
+                      "train.teacher_max_accel=None", "train.teacher_bend_lateral_accel=None"]
+    config = apply_overrides(preset_config("ppo-selfplay"), overrides)
+    train_path, _ = resolve_data(config, lambda line: None)
+    setup = setup_training(config, train_path, print_fn=lambda line: None)
+    setup.stream.close()
+    return setup.env, setup.pool
+
+
+def bench_step(scenes: int, agents: int, steps: int, with_teacher: bool, repeats: int) -> dict:
+    import jax
+    import jax.numpy as jnp
+
+    env, pool = _selfplay_setup(scenes, agents, with_teacher)
+    state = env.reset(pool, scenes, jax.random.PRNGKey(0))
+    zeros = jnp.zeros((scenes * agents, env.action_dim))
+
+    @jax.jit
+    def rollout(state):
+        return jax.lax.scan(lambda s, _: (env.step(s, zeros, pool)[0], None), state, None, length=steps)[0]
+
+    seconds = _median_seconds(rollout, state, repeats=repeats)
+    return {"scene_steps_per_s": steps * scenes / seconds, "slot_steps_per_s": steps * scenes * agents / seconds}
+
+
+def bench_rule_drivers(scenes: int, agents: int, repeats: int) -> dict:
+    """Microseconds per agent view of IDM (the teacher's settings) and PDM-Closed, on states 10 steps in."""
+    import jax
+    import jax.numpy as jnp
+
+    from vmax_sim.env.agent_view import agent_view
+    from vmax_sim.policies.idm import IDMConfig, idm_action
+    from vmax_sim.policies.pdm import pdm_policy
+
+    env, pool = _selfplay_setup(scenes, agents, with_teacher=True)
+    state = env.reset(pool, scenes, jax.random.PRNGKey(0))
+    zeros = jnp.zeros((scenes * agents, env.action_dim))
+    for _ in range(10):
+        state, _ = env.step(state, zeros, pool)
+    idm_config = IDMConfig(speed_factor=1.4, max_accel=2.5, bend_lateral_accel=3.0)
+    pdm = pdm_policy(env.core)
+    drivers = {"idm": lambda view: idm_action(view, idm_config, env.env_config.first_policy_timestep),
+               "pdm": lambda view: pdm.action_fn(None, view, None, None).data}
+
+    def over_views(driver):
+        def every_view(sim, slots, signs):
+            return jax.vmap(lambda slot: driver(agent_view(sim, slot, signs)))(slots)
+        return jax.jit(lambda s: jax.vmap(every_view)(s.sim, s.slots, s.signs))
+
+    views = scenes * agents
+    return {f"{name}_us_per_view": 1e6 * _median_seconds(over_views(fn), state, repeats=repeats) / views
+            for name, fn in drivers.items()}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenes", type=int, default=8)
+    parser.add_argument("--agents", type=int, default=8)
+    parser.add_argument("--steps", type=int, default=32)
+    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    report = {"scenes": args.scenes, "agents": args.agents,
+              **bench_rule_drivers(args.scenes, args.agents, args.repeats * 3),
+              "step_with_teacher": bench_step(args.scenes, args.agents, args.steps, True, args.repeats),
+              "step_without_teacher": bench_step(args.scenes, args.agents, args.steps, False, args.repeats)}
+    if args.json:
+        print(json.dumps(report, indent=1))
+        return
+    print(f"{args.scenes} scenes x {args.agents} agent views: IDM {report['idm_us_per_view']:.0f} us per view, "
+          f"PDM-Closed {report['pdm_us_per_view']:.0f} us per view")
+    for label in ("with", "without"):
+        row = report[f"step_{label}_teacher"]
+        print(f"SelfPlayEnv.step {label} the IDM teacher: {row['scene_steps_per_s']:,.0f} scene steps/s, "
+              f"{row['slot_steps_per_s']:,.0f} agent-slot steps/s")
+
+
+if __name__ == "__main__":
+    main()
