@@ -41,14 +41,13 @@ def _selfplay_setup(scenes: int, agents: int, with_teacher: bool):
     train_path, _ = resolve_data(config, lambda line: None)
     setup = setup_training(config, train_path, print_fn=lambda line: None)
     setup.stream.close()
-    return setup.env, setup.pool
+    return config, setup.env, setup.pool
 
 
-def bench_step(scenes: int, agents: int, steps: int, with_teacher: bool, repeats: int) -> dict:
+def bench_step(env, pool, scenes: int, agents: int, steps: int, repeats: int) -> dict:
     import jax
     import jax.numpy as jnp
 
-    env, pool = _selfplay_setup(scenes, agents, with_teacher)
     state = env.reset(pool, scenes, jax.random.PRNGKey(0))
     zeros = jnp.zeros((scenes * agents, env.action_dim))
 
@@ -60,24 +59,23 @@ def bench_step(scenes: int, agents: int, steps: int, with_teacher: bool, repeats
     return {"scene_steps_per_s": steps * scenes / seconds, "slot_steps_per_s": steps * scenes * agents / seconds}
 
 
-def bench_rule_drivers(scenes: int, agents: int, repeats: int) -> dict:
-    """Microseconds per agent view of IDM (the teacher's settings) and PDM-Closed, on states 10 steps in."""
+def bench_rule_drivers(config, env, pool, scenes: int, agents: int, repeats: int) -> dict:
+    """Microseconds per agent view of IDM (the preset's teacher, as `config` sets it) and PDM-Closed, on states 10
+    steps in."""
     import jax
     import jax.numpy as jnp
 
     from vmax_sim.env.agent_view import agent_view
-    from vmax_sim.policies.idm import IDMConfig, idm_action
-    from vmax_sim.policies.pdm import pdm_policy
+    from vmax_sim.policies.teacher import idm_teacher, pdm_teacher
 
-    env, pool = _selfplay_setup(scenes, agents, with_teacher=True)
     state = env.reset(pool, scenes, jax.random.PRNGKey(0))
     zeros = jnp.zeros((scenes * agents, env.action_dim))
     for _ in range(10):
         state, _ = env.step(state, zeros, pool)
-    idm_config = IDMConfig(speed_factor=1.4, max_accel=2.5, bend_lateral_accel=3.0)
-    pdm = pdm_policy(env.core)
-    drivers = {"idm": lambda view: idm_action(view, idm_config, env.env_config.first_policy_timestep),
-               "pdm": lambda view: pdm.action_fn(None, view, None, None).data}
+    train = config.train
+    drivers = {"idm": idm_teacher(env.core, train.teacher_speed_factor, train.teacher_max_accel,
+                                  train.teacher_bend_lateral_accel),
+               "pdm": pdm_teacher(env.core)}
 
     def over_views(driver):
         def every_view(sim, slots, signs):
@@ -97,10 +95,13 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    sizes = (args.scenes, args.agents)
+    config, env, pool = _selfplay_setup(*sizes, with_teacher=True)
+    _, untaught_env, untaught_pool = _selfplay_setup(*sizes, with_teacher=False)
     report = {"scenes": args.scenes, "agents": args.agents,
-              **bench_rule_drivers(args.scenes, args.agents, args.repeats * 3),
-              "step_with_teacher": bench_step(args.scenes, args.agents, args.steps, True, args.repeats),
-              "step_without_teacher": bench_step(args.scenes, args.agents, args.steps, False, args.repeats)}
+              **bench_rule_drivers(config, env, pool, *sizes, args.repeats * 3),
+              "step_with_teacher": bench_step(env, pool, *sizes, args.steps, args.repeats),
+              "step_without_teacher": bench_step(untaught_env, untaught_pool, *sizes, args.steps, args.repeats)}
     if args.json:
         print(json.dumps(report, indent=1))
         return
