@@ -30,19 +30,30 @@ def bounding_radius(box: jnp.ndarray) -> jnp.ndarray:
     return 0.5 * jnp.hypot(box[..., 2], box[..., 3])
 
 
-def _half_extent_on_axis(box: jnp.ndarray, axis: jnp.ndarray) -> jnp.ndarray:
-    """Half the box's shadow on a unit axis. box (..., 5), axis (..., 2) -> (...,)."""
-    heading, left = box_axes(box[..., 4])
-    return (0.5 * box[..., 2] * jnp.abs(jnp.sum(heading * axis, -1))
-            + 0.5 * box[..., 3] * jnp.abs(jnp.sum(left * axis, -1)))
+def _frame(box: jnp.ndarray) -> tuple[jnp.ndarray, ...]:
+    """Centre, heading cosine / sine and half extents as separate (...,) arrays.
+
+    The box checks below run on scalars per box rather than trailing 2-wide axes: XLA on the CPU vectorises
+    over the leading (proposal, step, object) axes then, which made PDM-Closed's collision checks ~3x cheaper.
+    """
+    return (box[..., 0], box[..., 1], jnp.cos(box[..., 4]), jnp.sin(box[..., 4]),
+            0.5 * box[..., 2], 0.5 * box[..., 3])
 
 
-def _candidate_axes(box_a: jnp.ndarray, box_b: jnp.ndarray) -> jnp.ndarray:
-    """The four separating-axis candidates of two rectangles. -> (..., 4, 2)."""
-    ha, la = box_axes(box_a[..., 4])
-    hb, lb = box_axes(box_b[..., 4])
-    ha, la = jnp.broadcast_to(ha, hb.shape), jnp.broadcast_to(la, lb.shape)
-    return jnp.stack([ha, la, hb, lb], axis=-2)
+def _separating_axes(box_a: jnp.ndarray, box_b: jnp.ndarray):
+    """Per candidate axis (the edge normals of both boxes): centre offset along it and both boxes' half shadows.
+
+    -> list of 4 (offset along the axis, summed half shadows, axis x, axis y), each (...,).
+    """
+    xa, ya, ca, sa, la, wa = _frame(box_a)
+    xb, yb, cb, sb, lb, wb = _frame(box_b)
+    dx, dy = xb - xa, yb - ya
+    axes = []
+    for ux, uy in ((ca, sa), (-sa, ca), (cb, sb), (-sb, cb)):
+        shadow_a = la * jnp.abs(ca * ux + sa * uy) + wa * jnp.abs(-sa * ux + ca * uy)
+        shadow_b = lb * jnp.abs(cb * ux + sb * uy) + wb * jnp.abs(-sb * ux + cb * uy)
+        axes.append((dx * ux + dy * uy, shadow_a + shadow_b, ux, uy))
+    return axes
 
 
 def boxes_overlap(box_a: jnp.ndarray, box_b: jnp.ndarray) -> jnp.ndarray:
@@ -51,11 +62,8 @@ def boxes_overlap(box_a: jnp.ndarray, box_b: jnp.ndarray) -> jnp.ndarray:
     Separating-axis test on the 4 edge normals. box_a, box_b broadcast: (..., 5) -> (...,) bool.
     """
     box_a, box_b = jnp.broadcast_arrays(box_a, box_b)
-    axes = _candidate_axes(box_a, box_b)  # (..., 4, 2)
-    gap = jnp.abs(jnp.sum((box_b[..., None, :2] - box_a[..., None, :2]) * axes, -1))
-    reach = (_half_extent_on_axis(box_a[..., None, :], axes)
-             + _half_extent_on_axis(box_b[..., None, :], axes))
-    return jnp.all(gap < reach, axis=-1)
+    inside = [jnp.abs(offset) < reach for offset, reach, _, _ in _separating_axes(box_a, box_b)]
+    return inside[0] & inside[1] & inside[2] & inside[3]
 
 
 def contact_time(box_a: jnp.ndarray, vel_a: jnp.ndarray, box_b: jnp.ndarray, vel_b: jnp.ndarray,
@@ -68,21 +76,18 @@ def contact_time(box_a: jnp.ndarray, vel_a: jnp.ndarray, box_b: jnp.ndarray, vel
     overlap give 0. box (..., 5), vel (..., 2) -> (...,) float32.
     """
     box_a, box_b = jnp.broadcast_arrays(box_a, box_b)
-    axes = _candidate_axes(box_a, box_b)  # (..., 4, 2)
-    offset = jnp.sum((box_b[..., None, :2] - box_a[..., None, :2]) * axes, -1)  # (..., 4)
-    rate = jnp.sum((vel_b - vel_a)[..., None, :] * axes, -1)  # d offset / dt
-    reach = (_half_extent_on_axis(box_a[..., None, :], axes)
-             + _half_extent_on_axis(box_b[..., None, :], axes))
-    # overlap on the axis while -reach < offset + rate * t < reach
-    safe_rate = jnp.where(jnp.abs(rate) < 1e-6, 1e-6, rate)
-    t1 = (-reach - offset) / safe_rate
-    t2 = (reach - offset) / safe_rate
-    moving = jnp.abs(rate) >= 1e-6
-    inside_now = jnp.abs(offset) < reach
-    t_enter = jnp.where(moving, jnp.minimum(t1, t2), jnp.where(inside_now, -jnp.inf, jnp.inf))
-    t_exit = jnp.where(moving, jnp.maximum(t1, t2), jnp.where(inside_now, jnp.inf, -jnp.inf))
-    enter = jnp.max(t_enter, -1)
-    leave = jnp.min(t_exit, -1)
+    rel_vx, rel_vy = vel_b[..., 0] - vel_a[..., 0], vel_b[..., 1] - vel_a[..., 1]
+    enter, leave = -jnp.inf, jnp.inf
+    for offset, reach, ux, uy in _separating_axes(box_a, box_b):
+        rate = rel_vx * ux + rel_vy * uy  # d offset / dt
+        # overlap on the axis while -reach < offset + rate * t < reach
+        moving = jnp.abs(rate) >= 1e-6
+        safe_rate = jnp.where(moving, rate, 1e-6)
+        t1 = (-reach - offset) / safe_rate
+        t2 = (reach - offset) / safe_rate
+        inside_now = jnp.abs(offset) < reach
+        enter = jnp.maximum(enter, jnp.where(moving, jnp.minimum(t1, t2), jnp.where(inside_now, -jnp.inf, jnp.inf)))
+        leave = jnp.minimum(leave, jnp.where(moving, jnp.maximum(t1, t2), jnp.where(inside_now, jnp.inf, -jnp.inf)))
     hit = (enter < leave) & (leave > 0.0) & (enter <= horizon)
     return jnp.where(hit, jnp.maximum(enter, 0.0), jnp.inf).astype(jnp.float32)
 
