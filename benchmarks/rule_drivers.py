@@ -12,20 +12,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
-import time
 
 
 def _median_seconds(fn, *args, repeats: int) -> float:
-    import jax
+    """Median wall-clock seconds of the jitted fn(*args) after one compiling call."""
+    from encoders import timed_ms  # the same timer (this folder is on the path of its scripts)
 
-    jax.block_until_ready(fn(*args))  # compile
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+    return timed_ms(fn, *args, runs=repeats, warmup=1)[0] / 1e3
 
 
 def _selfplay_setup(scenes: int, agents: int, with_teacher: bool):
