@@ -109,12 +109,27 @@ def cut(values: np.ndarray, start: int, length: int, fill) -> np.ndarray:
     return out
 
 
-def prediction_labels(raw: RawScenario) -> dict[str, np.ndarray]:
-    """tracks_to_predict / difficulty_level (by object index) and objects_of_interest (by the file's own
-    track ids) from the file's metadata. (N,) each"""
+def stale_track_indices(raw: RawScenario) -> str | None:
+    """Why the metadata's track indices cannot be trusted, or None when they can.
+
+    GPUDrive's writer since v0.4.0 (Feb 2025) leaves out vehicles and cyclists that are never valid but keeps
+    `sdc_track_index` and `tracks_to_predict` as positions in WOMD's full track list; the SDC is WOMD's last
+    track, so an index past the end of `objects` shows the shift. How many tracks went missing before a given
+    index is not written, so the indices cannot be mapped back."""
+    indices = ([] if raw.sdc_track_index is None else [raw.sdc_track_index]) + [i for i, _ in raw.tracks_to_predict]
+    beyond = [index for index in indices if index >= raw.num_objects]
+    if not beyond:
+        return None
+    return (f"metadata indexes track {max(beyond)} but the file holds {raw.num_objects} objects (its writer left "
+            f"out never-valid tracks): SDC chosen by rule, tracks_to_predict not read")
+
+
+def prediction_labels(raw: RawScenario, indices_trusted: bool = True) -> dict[str, np.ndarray]:
+    """tracks_to_predict / difficulty_level (by object index, when `indices_trusted`) and objects_of_interest
+    (by the file's own track ids) from the file's metadata. (N,) each"""
     num = raw.num_objects
     to_predict, difficulty = np.zeros(num, bool), np.zeros(num, np.int64)
-    for index, level in raw.tracks_to_predict:
+    for index, level in raw.tracks_to_predict if indices_trusted else ():
         if 0 <= index < num:
             to_predict[index], difficulty[index] = True, level if 0 <= level <= 2 else 0
     interest = np.zeros(num, bool) if raw.object_ids is None else \
@@ -148,17 +163,20 @@ def scenario_windows(raw: RawScenario, sizes: Sizes,
                                 f"{sizes.num_past + 1} (history and current step) a window needs")
         return
     tracks = clean_tracks(raw)
+    stale = stale_track_indices(raw)
     try:
-        sdc, rule = trk.choose_sdc(raw.sdc_track_index, tracks.types, tracks.valid,
+        sdc, rule = trk.choose_sdc(None if stale else raw.sdc_track_index, tracks.types, tracks.valid,
                                    np.stack([tracks.x, tracks.y], axis=-1))
     except trk.ScenarioError as error:
         yield trk.ScenarioError(f"scenario {raw.scenario_id}: {error}")
         return
     map_result = map_polylines(raw.roads)
     roadgraph = polylines_to_roadgraph(map_result.polylines)
-    labels = prediction_labels(raw)
+    labels = prediction_labels(raw, indices_trusted=stale is None)
     notes = {**tracks.notes, "sdc": {"object_index": sdc, "object_id": int(tracks.ids[sdc]), "rule": rule},
              "log_steps": raw.num_steps, **map_result.notes}
+    if stale:
+        notes["track_indices_ignored"] = stale
     if raw.num_steps < sizes.num_timesteps:
         notes["steps_padded"] = sizes.num_timesteps - raw.num_steps  # future not in the file (invalid)
     for start in starts:

@@ -15,9 +15,12 @@ The writers changed over time (Nocturne's `waymo_scenario_construction.py`, then
 The heading unit is still decided per file from the values (`headings_in_degrees`), not the label.
 Road `id`s are WOMD map feature ids, `map_element_id` Waymax's type code.
 
-GPUDrive's writers keep WOMD's track order (so `metadata.sdc_track_index` and `tracks_to_predict` index
-the `objects` list), one box size per object (its last valid state) and tl_states keyed by lane id;
-the Nocturne files we hold look the same (the SDC's track last, as in WOMD).
+GPUDrive's writers keep WOMD's track order, one box size per object (its last valid state) and tl_states
+keyed by lane id; the Nocturne files we hold look the same (the SDC's track last, as in WOMD). Since v0.4.0
+(Feb 2025) GPUDrive leaves out vehicles and cyclists that are never valid, yet `metadata.sdc_track_index` and
+`tracks_to_predict` still index WOMD's full list: an index past the end of `objects` makes the converter
+choose the SDC by rule and drop those labels (`convert.stale_track_indices`). Nocturne's first writer (2022)
+stored `position` and `velocity` as one object of parallel lists, `{"x": [...], "y": [...]}`.
 
 `parse_document` turns the JSON into numpy arrays (`RawScenario`) and refuses a file whose fields
 have the wrong shape or type with one `InputError` line naming the file and the field.
@@ -219,7 +222,10 @@ class _Fields:
         return self._array(values, where)
 
     def points(self, value: object, where: str, names: tuple[str, ...]) -> np.ndarray:
-        """A list of {x, y[, z]} objects. -> (k, len(names)) float64; an absent 'z' is NaN."""
+        """A list of {x, y[, z]} objects, or one object of parallel lists {"x": [...], "y": [...]} (Nocturne's
+        first writer, 2022). -> (k, len(names)) float64; an absent 'z' is NaN."""
+        if isinstance(value, Mapping):
+            value = self._rows_of_columns(value, where)
         values = self.items(value, where)
         try:  # the common layouts spelled out, read by itemgetter (C) where every point has every name
             if names == ("x", "y", "z"):
@@ -241,6 +247,15 @@ class _Fields:
                 if any(type(item) not in (int, float) for item in row):
                     self.fail(f"{where}[{index}]", "expected numeric coordinates")
         return self._array(flat, where).reshape(len(rows), len(names))
+
+    def _rows_of_columns(self, columns: Mapping, where: str) -> list[dict]:
+        """{"x": [...], "y": [...][, "z": [...]]} -> [{"x", "y"[, "z"]}, ...]; the lists must be equally long."""
+        names = [name for name in ("x", "y", "z") if name != "z" or name in columns]
+        lengths = {name: len(self.items(columns.get(name), f"{where}.{name}")) for name in names}
+        if len(set(lengths.values())) != 1:
+            self.fail(where, "coordinate lists differ in length (" +
+                      ", ".join(f"{name} {n}" for name, n in lengths.items()) + ")")
+        return [dict(zip(names, row)) for row in zip(*(columns[name] for name in names))]
 
     def flags(self, value: object, where: str) -> np.ndarray:
         """A list of booleans (0 / 1 accepted). -> (k,) bool"""

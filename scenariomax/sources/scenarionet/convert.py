@@ -17,6 +17,7 @@ noted, not fatal (unless one is the SDC).
 from __future__ import annotations
 
 import collections
+import dataclasses
 import functools
 import math
 from collections.abc import Iterator, Mapping
@@ -235,6 +236,12 @@ STATE_COLUMNS = {"position": slice(0, 3), "length": 3, "width": 4, "height": 5, 
                  "velocity": slice(7, 9), "valid": 9}
 HEADING_NAMES = ("heading", "heading_theta", "yaw")  # MetaDrive's object states call it heading_theta
 SIZE_NAMES = ("length", "width", "height")
+# MetaDrive's exports (`convert_recorded_scenario_exported`, since April 2023) write a box size only for objects
+# that report one; its traffic cones, warning triangles (typed TRAFFIC_OBJECT) and barriers never do, and
+# ScenarioNet's PG converter places them. Their sizes from MetaDrive's own classes, (length along the heading,
+# width, height) m: a cone is a cylinder of radius 0.2, a triangle of radius 0.5, a barrier 0.3 deep and 2 across.
+STATIC_OBJECT_SIZES = {"TRAFFIC_CONE": (0.4, 0.4, 2.0), "TRAFFIC_OBJECT": (1.0, 1.0, 1.2),
+                       "TRAFFIC_BARRIER": (0.3, 2.0, 2.0)}
 
 
 def _raw_state(track) -> Mapping | np.ndarray | None:
@@ -280,7 +287,17 @@ def track_state(key, track) -> Mapping:
             out.update(_split_size(state["size"]))
         except (ValueError, TypeError) as error:
             raise ScenarioBuildError(f"track {key}: bad size ({error})") from None
+    out.update(class_size(track, state) or {})
     return out
+
+
+def class_size(track, state) -> dict[str, np.ndarray] | None:
+    """length / width / height of a static object written without any size (STATIC_OBJECT_SIZES), else None."""
+    if not isinstance(state, Mapping) or "size" in state or any(name in state for name in SIZE_NAMES):
+        return None
+    kind = as_mapping(track).get("type")
+    size = STATIC_OBJECT_SIZES.get(kind) if isinstance(kind, str) else None
+    return None if size is None else {name: np.full(1, value) for name, value in zip(SIZE_NAMES, size)}
 
 
 def common_length(tracks: Mapping) -> int:
@@ -420,9 +437,13 @@ DATASETS_WITHOUT_SPEED_LIMITS = ("nuscenes", "av2", "argoverse")
 
 def map_has_speed_limits(desc: Mapping, meta: Mapping) -> bool:
     """False for databases whose writer put a placeholder in every lane's speed limit (metadata `dataset`, or the
-    `version` prefix that older writers set alone, e.g. "nuscenesv1.0-mini")."""
+    `version` prefix that older writers set alone, e.g. "nuscenesv1.0-mini"). MetaDrive's re-exports of a
+    scene (`dataset` "metadrive", the source's metadata under `history_metadata`) write 100 km/h on every lane
+    that had no km/h or mph value: every nuScenes, AV2 and nuPlan lane (whose m/s values it does not read)."""
     names = (str(meta.get("dataset", "")), str(desc.get("version", "")))
-    return not any(name.lower().startswith(DATASETS_WITHOUT_SPEED_LIMITS) for name in names)
+    source = str(as_mapping(meta.get("history_metadata")).get("dataset", "")).lower()
+    return not (any(name.lower().startswith(DATASETS_WITHOUT_SPEED_LIMITS) for name in names)
+                or source.startswith(DATASETS_WITHOUT_SPEED_LIMITS + ("nuplan",)))
 
 
 def _speed_limit(feature: Mapping) -> float:
@@ -476,7 +497,7 @@ def feature_type(feature: Mapping) -> int | None:
 def _feature_points(feature: Mapping, rg_type: int) -> np.ndarray:
     if rg_type == sch.RG_STOP_SIGN:
         points = feature.get("position", feature.get("pos", feature.get("polyline", [])))
-    elif rg_type in _CLOSED_TYPES:
+    elif rg_type in _CLOSED_TYPES or _is_sidewalk_outline(feature, rg_type):
         points = feature.get("polygon", feature.get("polyline", []))
     else:
         points = feature.get("polyline", [])
@@ -484,11 +505,48 @@ def _feature_points(feature: Mapping, rg_type: int) -> np.ndarray:
     return points[np.all(finite32(points), axis=1)]  # a NaN point would poison the resampling
 
 
+def _is_sidewalk_outline(feature: Mapping, rg_type: int) -> bool:
+    """A road edge written as a polygon alone: MetaDrive's PG maps (since September 2023) and ScenarioNet's
+    nuScenes and nuPlan walkways write ROAD_EDGE_SIDEWALK so."""
+    return rg_type in sch.ROAD_EDGE_TYPES and feature.get("polyline") is None and feature.get("polygon") is not None
+
+
+# ScenarioNet's nuScenes converter (every version) writes lane centre lines as the devkit's (x, y, yaw) poses: the
+# third column is the lane's heading in radians, not a height (nuScenes maps are flat; every other feature is 2-D).
+# Told apart by the values: a height that follows the lane's heading is not one.
+HEADING_AS_Z_TOLERANCE_RAD = 0.1  # a pose's yaw against its chord's direction (samples ~0.5 m apart)
+HEADING_AS_Z_SHARE = 0.9  # of the lane points
+HEADING_AS_Z_MIN_POINTS = 10
+
+
+def lane_z_is_heading(polylines: list[MapPolyline]) -> bool:
+    """Whether the lanes' z column holds their heading (see above) rather than a height."""
+    lanes = [line.xyz for line in polylines if line.feature_type in sch.LANE_TYPES and len(line.xyz) >= 2]
+    if sum(map(len, lanes)) < HEADING_AS_Z_MIN_POINTS:
+        return False
+    xyz = np.concatenate(lanes)  # (n, 3), every lane's points one after the other
+    if not np.any(np.abs(xyz[:, 2]) > HEADING_AS_Z_TOLERANCE_RAD):
+        return False  # flat already (an east-bound lane at z = 0 would look like its own heading)
+    step = np.diff(xyz[:, :2], axis=0)
+    heading = np.append(np.arctan2(step[:, 1], step[:, 0]), 0.0)  # (n,) towards the next point
+    last = np.cumsum([len(lane) for lane in lanes]) - 1
+    heading[last] = heading[last - 1]  # a lane's last point: the direction it came from
+    gaps = np.abs(wrap_angle(xyz[:, 2] - heading))
+    return float((gaps < HEADING_AS_Z_TOLERANCE_RAD).mean()) >= HEADING_AS_Z_SHARE
+
+
+def flat_lanes(polylines: list[MapPolyline]) -> list[MapPolyline]:
+    """The lanes at z = 0 (their z column was their heading: `lane_z_is_heading`)."""
+    return [dataclasses.replace(line, xyz=np.concatenate([line.xyz[:, :2], np.zeros((len(line.xyz), 1))], axis=1))
+            if line.feature_type in sch.LANE_TYPES else line for line in polylines]
+
+
 def map_polylines(features: Mapping, ids: Mapping, speed_limits: bool = True, orient_edges: bool = True
-                  ) -> tuple[list[MapPolyline], list[LaneLinks]]:
-    """The roadgraph polylines and lane links of a map; `speed_limits` False: the lanes' values are placeholders;
-    `orient_edges` False: road edges as written (see `ScenarioNetSource`)."""
-    polylines, links = [], []
+                  ) -> tuple[list[MapPolyline], list[LaneLinks], dict[str, Any]]:
+    """The roadgraph polylines and lane links of a map, and notes on what was read otherwise than written;
+    `speed_limits` False: the lanes' values are placeholders; `orient_edges` False: road edges as written (see
+    `ScenarioNetSource`)."""
+    polylines, links, sidewalks, notes = [], [], [], {}
     for key, feature in features.items():
         if not isinstance(feature, Mapping):
             continue
@@ -500,6 +558,9 @@ def map_polylines(features: Mapping, ids: Mapping, speed_limits: bool = True, or
         points = _feature_points(feature, rg_type)
         if len(points) == 0:
             continue
+        if _is_sidewalk_outline(feature, rg_type):
+            sidewalks.append(MapPolyline(ids[key], rg_type, points, closed=True))
+            continue
         is_lane = rg_type in sch.LANE_TYPES
         fid = ids[key]
         limit = _speed_limit(feature) if is_lane and speed_limits else -1.0
@@ -509,11 +570,19 @@ def map_polylines(features: Mapping, ids: Mapping, speed_limits: bool = True, or
                                    predecessors=_link_ids(feature.get("entry_lanes", feature.get("entry")), ids),
                                    left_neighbors=_link_ids(feature.get("left_neighbor", []), ids),
                                    right_neighbors=_link_ids(feature.get("right_neighbor", []), ids)))
+    if sidewalks and not any(line.feature_type in sch.ROAD_EDGE_TYPES for line in polylines):
+        # PG maps write their kerb as a painted line: the sidewalks' outlines are their only road edges (in nuScenes
+        # and nuPlan the drivable-area outline is, and the walkways would only double it)
+        polylines += sidewalks
+        notes["road_edges_from_sidewalks"] = len(sidewalks)
+    if lane_z_is_heading(polylines):
+        polylines = flat_lanes(polylines)
+        notes["lane_z_was_heading"] = "lane points' third column is their heading (nuScenes poses): read as z = 0"
     total = sum(roadgraph_samples(line) for line in polylines)
     if total > MAX_MAP_POINTS:
         raise ScenarioBuildError(f"map of {total} roadgraph points at {DEFAULT_SPACING_M:g} m is more than the "
                                  f"{MAX_MAP_POINTS} allowed")
-    return (orient_road_edges(polylines) if orient_edges else polylines), links
+    return (orient_road_edges(polylines) if orient_edges else polylines), links, notes
 
 
 # --- traffic lights --------------------------------------------------------------------------------
@@ -799,6 +868,9 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str, orient_
         file_notes["tracks_dropped"] = dict(list(dropped.items())[:20])  # unreadable tracks (first 20)
     if swapped.any():
         file_notes["boxes_swapped"] = [str(keys[i]) for i in np.flatnonzero(swapped)]
+    sized = [str(k) for k in keys if class_size(tracks[k], _raw_state(tracks[k]))]
+    if sized:
+        file_notes["sizes_from_class"] = sized[:20]  # static objects written without a size (first 20)
     key_ids = stable_int_ids(keys)
     object_ids = np.array([key_ids[k] for k in keys], np.int64)
     is_sdc = np.arange(len(keys)) == sdc
@@ -808,7 +880,9 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str, orient_
     speed_limits = map_has_speed_limits(desc, meta)
     if not speed_limits:
         file_notes["speed_limits_ignored"] = "the writer's constant placeholder on every lane (no limits in this map)"
-    polylines, links = map_polylines(features, map_ids, speed_limits=speed_limits, orient_edges=orient_edges)
+    polylines, links, map_notes = map_polylines(features, map_ids, speed_limits=speed_limits,
+                                                orient_edges=orient_edges)
+    file_notes.update(map_notes)
     roadgraph = polylines_to_roadgraph(polylines)
     lane_graph = lane_graph_arrays(links, sizes.num_lane_links)
     light_states, unread_entries = light_table(desc.get("dynamic_map_states"), num_steps)

@@ -140,10 +140,11 @@ def test_sdc_invalid_at_the_current_step(tmp_path):
     assert "the SDC (object 3) is not valid at the current step" in failure(tmp_path, doc)
 
 
-def test_named_sdc_out_of_range(tmp_path):
-    doc = scene_document("gpudrive-metadata")
-    doc["metadata"]["sdc_track_index"] = 9
-    assert "metadata.sdc_track_index 9 is outside the 4 objects" in failure(tmp_path, doc)
+def test_coordinate_lists_of_different_lengths(tmp_path):
+    doc = scene_document("nocturne")
+    xs = [p["x"] for p in doc["objects"][0]["position"]]
+    doc["objects"][0]["position"] = {"x": xs, "y": xs[:-1]}
+    assert "objects[0].position: coordinate lists differ in length (x 91, y 90)" in input_error(tmp_path, doc)
 
 
 def test_no_sdc_candidate(tmp_path):

@@ -67,6 +67,32 @@ def test_named_sdc_wins(tmp_path):
     assert scenario.object_id[0] == 12 and scenario.is_sdc.sum() == 1
 
 
+def test_indices_past_the_objects_choose_the_sdc_by_rule_and_drop_the_labels(tmp_path):
+    # GPUDrive since v0.4.0 leaves out never-valid vehicles but keeps WOMD's track indices in its metadata:
+    # here two such tracks were left out before the SDC, so the file names tracks 5 and 3 among 4 objects.
+    doc = scene_document("gpudrive-metadata")
+    doc["metadata"]["sdc_track_index"] = 5
+    doc["metadata"]["tracks_to_predict"] = [{"track_index": 3, "difficulty": 2}]
+    scenario = only_scenario(tmp_path, doc)
+    notes = notes_of(scenario)
+    assert notes["sdc"] == {"object_index": 3, "object_id": 14, "rule": "last-track"}
+    assert "metadata indexes track 5 but the file holds 4 objects" in notes["track_indices_ignored"]
+    assert not scenario.tracks_to_predict.any() and not scenario.difficulty_level.any()
+    assert scenario.objects_of_interest.tolist() == [i == row_of(scenario, 12) for i in range(4)]  # ids, kept
+
+
+def test_parallel_coordinate_lists_read_as_points(tmp_path):
+    # Nocturne's first writer (2022) stored position and velocity as {"x": [...], "y": [...]}.
+    rows = scene_document("nocturne")
+    columns = scene_document("nocturne")
+    for obj in columns["objects"]:
+        for key in ("position", "velocity"):
+            obj[key] = {name: [point[name] for point in obj[key]] for name in ("x", "y")}
+    expected, got = only_scenario(tmp_path, rows), only_scenario(tmp_path, columns)
+    for field in ("x", "y", "z", "bbox_yaw", "velocity_x", "velocity_y", "valid", "roadgraph_xyz"):
+        np.testing.assert_array_equal(getattr(got, field), getattr(expected, field), err_msg=field)
+
+
 def test_metadata_labels_and_ids(tmp_path):
     scenario = only_scenario(tmp_path, scene_document("gpudrive-metadata"))
     assert scenario.scenario_id == "toy-gpudrive-metadata"

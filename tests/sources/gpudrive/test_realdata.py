@@ -152,3 +152,24 @@ def test_pipeline_with_enrichment_writes_valid_shards(tmp_path):
     manifest = json.loads((tmp_path / "out" / "manifest.json").read_text())
     assert len(manifest["notes"]) == 10
     assert all("sdc" in entry["notes"] and "layout" in entry["notes"] for entry in manifest["notes"])
+
+
+@pytest.mark.parametrize("relative", ["gpudrive/tfrecord-00000-of-00150_78.json",
+                                      "gpudrive/tfrecord-00149-of-00150_111.json",
+                                      "gpudrive/tfrecord-00043-of-00150_223.json"])
+def test_files_without_never_valid_vehicles_keep_their_sdc(tmp_path, relative):
+    """GPUDrive's writer since v0.4.0 leaves out the vehicles and cyclists that are never valid and keeps WOMD's
+    indices in its metadata: these real files, so written, still convert with the same SDC and no misplaced
+    tracks_to_predict."""
+    raw = json.loads(realdata_file(relative).read_text())
+    sdc_id = raw["objects"][raw["metadata"]["sdc_track_index"]]["id"]
+    kept = [o for o in raw["objects"] if o["type"] not in ("vehicle", "cyclist") or any(o["valid"])]
+    assert len(kept) < len(raw["objects"])
+    path = tmp_path / "dropped.json"
+    path.write_text(json.dumps(dict(raw, objects=kept)))
+    items = list(GpuDriveSource(str(path)).read_unit(str(path)))
+    assert len(items) == 1 and isinstance(items[0], Scenario), items
+    scenario = items[0]
+    assert scenario.is_sdc[0] and scenario.object_id[0] == sdc_id
+    assert "track_indices_ignored" in scenario.metadata[MANIFEST_NOTES]
+    assert not scenario.tracks_to_predict.any()

@@ -246,3 +246,90 @@ def test_real_20s_pickle_with_current_time_index_zero(tmp_path):
     items = scenarios(convert(tmp_path, desc, name="zero.pkl"))
     assert [s.metadata["log_start_step"] for s in items] == [0, 80]
     assert all(s.valid[s.sdc_index].all() for s in items)
+
+
+# --- MetaDrive exports since April 2023 (PG maps, ScenarioEnv re-exports) ------------------------------
+def metadrive_export(num_steps: int = 91) -> dict:
+    """What `convert_recorded_scenario_exported` writes for a PG scene: a size only for objects that report one
+    (not the cone, barrier and warning triangle its accident scenes place), the kerb as a painted line, the
+    sidewalk as a polygon alone, 100 km/h on every lane, and the re-exported source's metadata kept aside."""
+    t, ego, _ = _drive(num_steps)
+
+    def still(x, y, kind):
+        return {"type": kind, "state": {"position": np.tile(np.float32([x, y, 0.0]), (num_steps, 1)),
+                                        "heading_theta": np.zeros(num_steps, np.float32),
+                                        "velocity": np.zeros((num_steps, 2), np.float32),
+                                        "valid": np.ones(num_steps, bool)}}
+
+    tracks = {"ego": {"type": "VEHICLE", "state": {
+        "position": ego, "heading_theta": np.zeros(num_steps, np.float32), "length": np.full(num_steps, 4.5),
+        "width": np.full(num_steps, 2.0), "height": np.full(num_steps, 1.5),
+        "velocity": np.tile(np.float32([2.0, 0.0]), (num_steps, 1)), "valid": np.ones(num_steps, bool)}},
+              "cone": still(30.0, 1.0, "TRAFFIC_CONE"), "barrier": still(40.0, -1.0, "TRAFFIC_BARRIER"),
+              "triangle": still(50.0, 0.5, "TRAFFIC_OBJECT")}
+    map_features = {
+        "lane": {**LANE, "speed_limit_kmh": 100.0},
+        "0_0_side": {"type": "ROAD_LINE_SOLID_SINGLE_WHITE", "polyline": np.array([[0.0, -2.0], [100.0, -2.0]])},
+        "sidewalk": {"type": "ROAD_EDGE_SIDEWALK",
+                     "polygon": np.array([[0.0, -2.0], [100.0, -2.0], [100.0, -5.0], [0.0, -5.0]])},
+    }
+    return {"id": "pg", "version": "2023-10", "tracks": tracks, "map_features": map_features,
+            "dynamic_map_states": {},
+            "metadata": {"dataset": "metadrive", "sdc_id": "ego", "ts": list(t),
+                         "history_metadata": {"dataset": "nuscenes"}}}
+
+
+def test_static_objects_written_without_a_size_get_metadrive_class_sizes(tmp_path):
+    (scenario,) = scenarios(convert(tmp_path, metadrive_export()))
+    notes = scenario.metadata[MANIFEST_NOTES]
+    assert "tracks_dropped" not in notes and sorted(notes["sizes_from_class"]) == ["barrier", "cone", "triangle"]
+    assert scenario.num_objects == 4 and set(scenario.object_type[1:]) == {sch.OBJECT_TYPE_OTHER}
+    boxes = {(round(float(scenario.x[i, 10])), round(float(scenario.length[i, 10]), 3),
+              round(float(scenario.width[i, 10]), 3)) for i in range(1, 4)}
+    assert boxes == {(30, 0.4, 0.4), (40, 0.3, 2.0), (50, 1.0, 1.0)}  # the barrier: 2 m across the lane
+
+
+def test_sidewalk_polygons_are_the_road_edge_where_the_map_has_no_other(tmp_path):
+    (scenario,) = scenarios(convert(tmp_path, metadrive_export()))
+    edge = scenario.roadgraph_valid & (scenario.roadgraph_type == sch.RG_ROAD_EDGE_BOUNDARY)
+    assert edge.any() and scenario.metadata[MANIFEST_NOTES]["road_edges_from_sidewalks"] == 1
+    assert scenario.roadgraph_xyz[edge, 1].min() == pytest.approx(-5.0) and scenario.roadgraph_xyz[edge, 1].max() \
+        == pytest.approx(-2.0)
+    # with a drivable-area outline (nuScenes, nuPlan) the walkways are left out: they would only double it
+    desc = metadrive_export()
+    desc["map_features"]["boundary_0"] = {"type": "ROAD_LINE_SOLID_SINGLE_WHITE",
+                                          "polyline": np.array([[0.0, -2.0], [100.0, -2.0]])}
+    (scenario,) = scenarios(convert(tmp_path, desc))
+    edge = scenario.roadgraph_valid & (scenario.roadgraph_type == sch.RG_ROAD_EDGE_BOUNDARY)
+    assert "road_edges_from_sidewalks" not in scenario.metadata[MANIFEST_NOTES]
+    np.testing.assert_allclose(scenario.roadgraph_xyz[edge, 1], -2.0)
+
+
+def test_reexported_placeholder_speed_limits_are_unknown(tmp_path):
+    (scenario,) = scenarios(convert(tmp_path, metadrive_export()))
+    lane = scenario.roadgraph_valid & np.isin(scenario.roadgraph_type, sch.LANE_TYPES)
+    assert lane.any() and (scenario.roadgraph_speed_limit[lane] == -1).all()
+    assert "speed_limits_ignored" in scenario.metadata[MANIFEST_NOTES]
+    desc = metadrive_export()
+    desc["metadata"]["history_metadata"]["dataset"] = "waymo"  # WOMD lanes carry real limits
+    (scenario,) = scenarios(convert(tmp_path, desc))
+    assert scenario.roadgraph_speed_limit[lane].max() == pytest.approx(100 / 3.6, abs=1e-3)
+
+
+def test_lane_heights_that_follow_the_heading_are_headings(tmp_path):
+    (flat,) = scenarios(convert(tmp_path, sized_description()))  # an east-bound lane at z = 0: nothing to say
+    assert "lane_z_was_heading" not in flat.metadata.get(MANIFEST_NOTES, {})
+    desc = sized_description()
+    arc = np.linspace(0.0, np.pi / 2, 40)  # a quarter circle of radius 30 m, written as (x, y, yaw) poses
+    poses = np.stack([30 * np.sin(arc), 30 * (1 - np.cos(arc)), arc], axis=1)
+    desc["map_features"] = {"1": dict(LANE), "2": {"type": "LANE_SURFACE_STREET", "polyline": poses}}
+    (scenario,) = scenarios(convert(tmp_path, desc))
+    lane = scenario.roadgraph_valid & np.isin(scenario.roadgraph_type, sch.LANE_TYPES)
+    assert not scenario.roadgraph_xyz[lane, 2].any() and "lane_z_was_heading" in scenario.metadata[MANIFEST_NOTES]
+    # heights that do not follow the heading stay (a ramp rising 1 m per 10 m)
+    ramp = np.array([[float(x), 0.0, x / 10] for x in range(0, 101, 5)])
+    desc["map_features"] = {"1": {"type": "LANE_SURFACE_STREET", "polyline": ramp}}
+    (scenario,) = scenarios(convert(tmp_path, desc))
+    lane = scenario.roadgraph_valid & np.isin(scenario.roadgraph_type, sch.LANE_TYPES)
+    assert scenario.roadgraph_xyz[lane, 2].max() == pytest.approx(10.0, abs=0.01)
+    assert "lane_z_was_heading" not in scenario.metadata.get(MANIFEST_NOTES, {})

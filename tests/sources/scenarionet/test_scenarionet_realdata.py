@@ -9,6 +9,7 @@ import pickle
 import numpy as np
 import pytest
 
+from scenariomax import schema as sch
 from scenariomax.codec import decode_scenario, encode_scenario
 from scenariomax.scenario import Scenario
 from scenariomax.schema import Sizes
@@ -132,6 +133,24 @@ def test_nuscenes_databases_match_raw(everything):
             assert scenario.length[0, 0] == pytest.approx(float(np.median(ego["width"])), abs=1e-3)
             assert scenario.width[0, 0] == pytest.approx(float(np.median(ego["length"])), abs=1e-3)
             assert "ego" in scenario.metadata[MANIFEST_NOTES]["boxes_swapped"]
+
+
+def test_nuscenes_lane_headings_are_not_read_as_heights(everything):
+    """ScenarioNet's nuScenes converter writes lane centre lines as (x, y, yaw) poses: the yaw column is no height
+    (the rest of a nuScenes map is 2-D), and read as one it tilted the lanes' directions up to vertical."""
+    root, converted = everything
+    units = [u for u in converted if "nuscenes" in u]
+    assert units
+    for unit in units:
+        raw = independent_read(unit)
+        lanes = [f for f in raw["map_features"].values() if str(f.get("type", "")).startswith("LANE")]
+        assert any(np.abs(np.asarray(f["polyline"])[:, 2]).max() > 1.0 for f in lanes)  # the poses' yaw
+        for scenario in converted[unit]:
+            lane = scenario.roadgraph_valid & np.isin(scenario.roadgraph_type, sch.LANE_TYPES)
+            assert lane.any() and not scenario.roadgraph_xyz[lane, 2].any()
+            flat = np.linalg.norm(scenario.roadgraph_dir[lane, :2], axis=-1)  # 0 at a polyline's last point
+            assert np.all((np.abs(flat - 1.0) < 1e-3) | (flat == 0.0)) and (flat > 0).mean() > 0.9
+            assert "lane_z_was_heading" in scenario.metadata[MANIFEST_NOTES]
 
 
 def test_womd_20s_lights_and_jittery_times(everything):
