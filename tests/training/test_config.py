@@ -126,8 +126,8 @@ def test_the_dagger_preset_is_the_documented_bc_recipe_and_overrides_still_apply
     assert config.algo_config.updates_per_step == 4  # half of BC's: steadier on real scenes (docs/learning.md)
     assert config.algo_config.buffer_size == 600_000 and config.obs.object_selection == "route"
     assert config.data.synthetic.sdc_slow_start == 1.0 and config.data.synthetic.max_parked == 40
-    # checkpoints carry the 2.9 GB buffer: far apart; an hour's budget, not the step count, ends a run here
-    assert (config.train.checkpoint_every, config.train.total_env_steps) == (100_000, 1_000_000)
+    # checkpoints carry the 2.9 GB buffer: far apart; past 500k env steps the real scenes fell (session 77)
+    assert (config.train.checkpoint_every, config.train.total_env_steps) == (100_000, 500_000)
     # a brake that stops the car, and the last four checkpoints driving as one (docs/learning.md)
     assert (config.env.dynamics, config.train.ensemble, config.train.ensemble_every) == ("bicycle_no_reverse", 4, None)
     # a fresh quarter of the map's points hidden in each training observation: steadier on real scenes

@@ -356,9 +356,10 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # the last 4 checkpoints kept as RUN/ensemble (one checkpoint swings by 10-15 points on real scenes). The buffer keeps
 # 600k steps (an hour's when it was set; hours now run up to ~870k: a 1M buffer scored alike per checkpoint on real
 # scenes, session 50): 2.9 GB, which every checkpoint carries, so checkpoints (and evaluations) come every 100k env
-# steps (~8 min here), not every 20k. 1M env steps take ~80 minutes on 2 CPU cores: `train.max_wall_minutes=60` is
-# the issue's hour. Half the training scenes are read without their traffic-light states, as most real recordings
-# come (two hours, seeds 0 and 1: held-out synthetic ensembles 94-96 -> 98-99%, V-Max 0.933-0.936 -> 0.954-0.970;
+# steps (~8 min here), not every 20k. 1M env steps took ~80 minutes on 2 CPU cores: `train.max_wall_minutes=60` is
+# the issue's hour (the preset's steps are 500k since session 77, below). Half the training scenes are read
+# without their traffic-light states, as most real recordings come (two hours, seeds 0 and 1: held-out synthetic
+# ensembles 94-96 -> 98-99%, V-Max 0.933-0.936 -> 0.954-0.970;
 # real scenes level per checkpoint, V-Max 0.840 -> 0.867; docs/learning.md, session 36), from the student only: its
 # teacher still stops at the red it cannot see (seed 0, ~540k env steps: real ensemble 89.7 -> 100% accuracy, V-Max
 # 0.886 -> 0.889; held-out synthetic V-Max 0.950 -> 0.928; session 37; seed 1, 460k: real 93.1% / 0.923, session 38).
@@ -412,11 +413,18 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # two seeds' whole hours its ensembles pass 96.6% and 100% of the real scenes, the preset's 82.8% and 93.1%: in the
 # preset since session 68 (`obs.object_route_frame=false` for the recipe before it). The preset's hours on every seed
 # since then changed no override: docs/learning.md, ablation rows 85-89.
+# 500k env steps, not 1M (session 77): with PDM-Closed's checks 3x cheaper (session 76) the whole 1M fits the hour,
+# and past 500k the real scenes fall while held-out synthetic does not. Guarded, on the 29 judged real scenes, the
+# 500k checkpoints of seeds 0-3 pass 100, 100, 100 and 96.6% (mean V-Max 0.941), their 12 later checkpoints
+# 89.7-96.6% (mean 94.3%); seed 4, trained after the choice to test it, 96.6% / 0.932 at 500k and 96.6% / 0.923 at
+# its hour's end (944k); seeds 5 and 6, 100.0% / 0.941 and 86.2% / 0.909 at their ends. A run trains the same
+# steps either way (nothing in the preset reads the total), so the hour now ends at the 500k checkpoint, in ~30
+# minutes on a 2-core AMD VM.
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm_follow", "algo.student_drive=0.5", "algo.student_mix=episode",
     "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=600000",
     "data.synthetic.junction_parking=0.6", "data.synthetic.max_parked=40", "data.synthetic.parked_fraction=0.4,0.9",
-    "data.synthetic.sdc_slow_start=1", "data.synthetic.traffic_density=1.5", "train.total_env_steps=1000000",
+    "data.synthetic.sdc_slow_start=1", "data.synthetic.traffic_density=1.5", "train.total_env_steps=500000",
     "train.eval_every=100000", "train.checkpoint_every=100000", "env.dynamics=bicycle_no_reverse", "train.ensemble=4",
     "data.hide_lights=0.5", "data.hide_lights_from=all", "obs.noise.map_dropout=0.25", "train.brake_guard_ttc=2",
     "obs.object_route_frame=true")
