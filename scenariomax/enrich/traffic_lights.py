@@ -55,13 +55,20 @@ def _stop_pose(scenario: Scenario, light: int, lanes: Lanes) -> tuple[np.ndarray
 
 
 def _fill_gaps(evidence: np.ndarray, max_gap: int) -> np.ndarray:
-    """Fills runs of False of length <= max_gap that lie between two True entries. (T,) -> (T,)"""
-    out = evidence.copy()
-    idx = np.flatnonzero(evidence)
-    for a, b in zip(idx[:-1], idx[1:]):
-        if 1 < b - a <= max_gap + 1:
-            out[a:b] = True
-    return out
+    """Fills runs of False of length <= max_gap that lie between two True entries, along the last axis.
+    (..., T) -> (..., T)"""
+    steps = np.arange(evidence.shape[-1])
+    before = np.maximum.accumulate(np.where(evidence, steps, -1), axis=-1)  # the last True at or before each step
+    after = np.flip(np.minimum.accumulate(np.flip(np.where(evidence, steps, evidence.shape[-1]), -1), axis=-1), -1)
+    return evidence | ((before >= 0) & (after < evidence.shape[-1]) & (after - before <= max_gap + 1))
+
+
+def _dilate(marks: np.ndarray, reach: int) -> np.ndarray:
+    """True where a True of `marks` lies within `reach` steps either side, along the last axis. (..., T) -> (..., T)"""
+    count = np.concatenate([np.zeros(marks.shape[:-1] + (1,), np.int64), np.cumsum(marks, axis=-1)], axis=-1)
+    steps = np.arange(marks.shape[-1])
+    high, low = np.minimum(steps + reach + 1, marks.shape[-1]), np.maximum(steps - reach, 0)
+    return count[..., high] > count[..., low]
 
 
 class Motion(NamedTuple):
@@ -144,13 +151,12 @@ def _evidence_of_lights(num_steps: int, stops: np.ndarray, directions: np.ndarra
     # Per light: any of its vehicles (pairs sorted by light; each run of one light's pairs reduced at once).
     lights, first = np.unique(light, return_index=True)  # (L',), (L',)
     reds[lights] = (np.logical_or.reduceat(queued, first, axis=0) & np.logical_or.reduceat(crossing, first, axis=0))
-    for row, crossed_light in zip(lights.tolist(), np.logical_or.reduceat(crossed, first, axis=0)):  # (T - 1,) each
-        green = greens[row]
-        for step in np.flatnonzero(crossed_light) + 1:
-            green[max(step - settings.green_window, 0):step + settings.green_window + 1] = True
-        green, red = _fill_gaps(green, settings.max_gap_steps), _fill_gaps(reds[row], settings.max_gap_steps)
-        conflict = green & red
-        greens[row], reds[row] = green & ~conflict, red & ~conflict
+    crossed_at = np.zeros((len(lights), num_steps), bool)
+    crossed_at[:, 1:] = np.logical_or.reduceat(crossed, first, axis=0)  # a vehicle crossed on arriving at the step
+    green = _fill_gaps(_dilate(crossed_at, settings.green_window), settings.max_gap_steps)
+    red = _fill_gaps(reds[lights], settings.max_gap_steps)
+    conflict = green & red
+    greens[lights], reds[lights] = green & ~conflict, red & ~conflict
     return greens, reds
 
 

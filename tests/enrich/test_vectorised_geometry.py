@@ -352,3 +352,29 @@ def test_run_search_is_exact_where_offset_keys_round_together():
     np.testing.assert_array_equal(run_interp(x, x_run, xp, fp, counts),
                                   [np.interp(value, xps[r], fp[starts[r]:starts[r] + counts[r]])
                                    for value, r in zip(x, x_run)])
+
+
+def test_light_evidence_gaps_and_windows_match_the_step_loops():
+    from scenariomax.enrich.traffic_lights import _dilate, _fill_gaps
+
+    def fill_reference(evidence, max_gap):  # the former loop over consecutive True steps
+        out = evidence.copy()
+        idx = np.flatnonzero(evidence)
+        for a, b in zip(idx[:-1], idx[1:]):
+            if 1 < b - a <= max_gap + 1:
+                out[a:b] = True
+        return out
+
+    def dilate_reference(marks, reach):  # the former window written around each crossing step
+        out = np.zeros_like(marks)
+        for step in np.flatnonzero(marks):
+            out[max(step - reach, 0):step + reach + 1] = True
+        return out
+
+    rng = np.random.default_rng(0)
+    for _ in range(500):
+        rows = rng.random((4, int(rng.integers(1, 40)))) < rng.random()
+        reach = int(rng.integers(0, 6))
+        np.testing.assert_array_equal(_fill_gaps(rows, reach), [fill_reference(r, reach) for r in rows])
+        np.testing.assert_array_equal(_dilate(rows, reach), [dilate_reference(r, reach) for r in rows])
+        np.testing.assert_array_equal(_fill_gaps(rows[0], reach), fill_reference(rows[0], reach))
