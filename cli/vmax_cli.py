@@ -134,7 +134,7 @@ def _check_data(specs, deep: bool, skip: bool, quiet: bool, share: tuple[int, in
                    "wayformer), reward (safety, navigation, behavior), 'paper' for the paper's hyper-parameters, "
                    "'selfplay' (ppo-selfplay: one policy drives the SDC and every controllable agent), 'dagger' "
                    "(bc-dagger, the default: behaviour cloning taught by PDM-Closed with DAgger, the recipe that "
-                   "learnt best in an hour on 2 CPU cores; its replay keeps the hour, ~3 GB; docs/learning.md); "
+                   "learnt best in an hour on 2 CPU cores, its replay keeps its 500k steps: 2.4 GB; docs/learning.md); "
                    "both: bc-dagger-selfplay (that learner over every agent, taught by IDM; ~5 GB replay).")
 @click.option("--data", default=None, help="Training shards (default: the embedded synthetic split).")
 @click.option("--eval-data", default=None, help="Held-out shards for evaluation (default: synthetic, disjoint seeds).")

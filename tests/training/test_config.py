@@ -124,7 +124,7 @@ def test_the_dagger_preset_is_the_documented_bc_recipe_and_overrides_still_apply
     assert (config.train.teacher, config.train.traffic) == ("pdm_state", "idm_follow")  # sessions 47-48
     assert (config.algo_config.student_drive, config.algo_config.student_mix) == (0.5, "episode")
     assert config.algo_config.updates_per_step == 4  # half of BC's: steadier on real scenes (docs/learning.md)
-    assert config.algo_config.buffer_size == 600_000 and config.obs.object_selection == "route"
+    assert config.algo_config.buffer_size == 500_000 and config.obs.object_selection == "route"  # = its steps
     assert config.data.synthetic.sdc_slow_start == 1.0 and config.data.synthetic.max_parked == 40
     # checkpoints carry the 2.9 GB buffer: far apart; past 500k env steps the real scenes fell (session 77)
     assert (config.train.checkpoint_every, config.train.total_env_steps) == (100_000, 500_000)

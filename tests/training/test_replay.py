@@ -73,6 +73,18 @@ def test_samples_equal_a_buffer_of_whole_transitions_across_episode_ends(capacit
     assert lost_last_observations(replay) == 0
 
 
+def test_a_replay_sized_to_the_run_samples_what_a_larger_one_does():
+    # the default preset's buffer holds exactly its 500k env steps (was 600k, 0.5 GB more): while a run writes
+    # no more rows than the smaller capacity, every add and sample is the same, so training is unchanged
+    small = replay_init(example(), 40, NUM_ENVS, jnp.float16, min_truncated_length=1)
+    large = replay_init(example(), 64, NUM_ENVS, jnp.float16, min_truncated_length=1)
+    add, sample = jax.jit(replay_add), jax.jit(replay_sample, static_argnums=2)
+    for step, transition in enumerate(toy_steps(10, seed=3)):  # 40 transitions: the small one just full
+        small, large = add(small, transition), add(large, transition)
+        key = jax.random.PRNGKey(step)
+        jax.tree.map(np.testing.assert_array_equal, sample(small, key, 32), sample(large, key, 32))
+
+
 def test_truncations_beyond_the_sized_ring_are_counted():
     replay = replay_init(example(), 40, NUM_ENVS)  # 10 steps held: a ring of 4 * (1 + 1) last observations
     for transition in toy_steps(30, seed=1, end_probability=1.0):  # every step ends every episode
