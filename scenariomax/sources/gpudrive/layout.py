@@ -327,7 +327,7 @@ def _object_arrays(fields: _Fields, objects: list) -> dict:
 
 
 def _roads(fields: _Fields, roads: list) -> tuple[RawRoad, ...]:
-    heads = []
+    out = []
     for index, item in enumerate(roads):
         where = f"roads[{index}]"
         road = fields.mapping(item, where)
@@ -338,27 +338,13 @@ def _roads(fields: _Fields, roads: list) -> tuple[RawRoad, ...]:
             fields.fail(where, "missing 'geometry'")
         element = road.get("map_element_id")
         road_id = road.get("id")
-        heads.append((kind, None if element is None else fields.integer(element, f"{where}.map_element_id"),
-                      None if road_id is None else fields.integer(road_id, f"{where}.id")))
-    geometries = _road_points(fields, [road["geometry"] for road in roads])
-    return tuple(RawRoad(kind=kind, element_id=element, road_id=road_id, xyz=xyz)
-                 for (kind, element, road_id), xyz in zip(heads, geometries))
-
-
-def _road_points(fields: _Fields, geometries: list) -> list[np.ndarray]:
-    """Every road's (k, 3) points, read in one pass over all roads where each is a list of {x, y, z} numbers (a
-    map has thousands of roads: read one by one, the calls cost more than the points); otherwise road by road,
-    which names the first one that does not read."""
-    if all(type(geometry) is list for geometry in geometries):
-        try:
-            flat = list(itertools.chain.from_iterable(map(_XYZ, itertools.chain.from_iterable(geometries))))
-            values = np.fromiter(flat, np.float64) if set(map(type, flat)) <= {int, float} else None
-        except (TypeError, KeyError, AttributeError, OverflowError):
-            values = None
-        if values is not None:
-            return np.split(values.reshape(-1, 3), np.cumsum([len(geometry) for geometry in geometries])[:-1])
-    return [fields.points(geometry, f"roads[{index}].geometry", ("x", "y", "z"))
-            for index, geometry in enumerate(geometries)]
+        out.append(RawRoad(
+            kind=kind,
+            element_id=None if element is None else fields.integer(element, f"{where}.map_element_id"),
+            road_id=None if road_id is None else fields.integer(road_id, f"{where}.id"),
+            xyz=fields.points(road["geometry"], f"{where}.geometry", ("x", "y", "z")),
+        ))
+    return tuple(out)
 
 
 def _lights(fields: _Fields, tl_states: Mapping | None) -> tuple[RawLight, ...]:
