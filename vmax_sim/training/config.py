@@ -354,10 +354,10 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # car") with 4 gradient updates per batched env step instead of BC's 8 (steadier on real scenes, 25% more env steps
 # per hour), a car that does not reverse (students backed into the car behind them at rest) and the mean action of
 # the last 4 checkpoints kept as RUN/ensemble (one checkpoint swings by 10-15 points on real scenes). The buffer keeps
-# every step the run trains (500k since session 78, when the preset's steps fell to 500k: 600k before, 0.5 GB never
-# written; a 1M buffer scored alike per checkpoint on real scenes, session 50): 2.4 GB, which every checkpoint
-# carries, so checkpoints (and evaluations) come every 100k env
-# steps (~8 min here), not every 20k. 1M env steps took ~80 minutes on 2 CPU cores: `train.max_wall_minutes=60` is
+# every step the run trains, DAGGER_ENV_STEPS (since session 78; 600k before, 0.5 GB never written; a 1M buffer
+# scored alike per checkpoint on real scenes, session 50): 2.4 GB, which every checkpoint carries, so checkpoints
+# (and evaluations) come every 100k env steps (~8 min here), not every 20k. 1M env steps took ~80 minutes on 2 CPU
+# cores: `train.max_wall_minutes=60` is
 # the issue's hour (the preset's steps are 500k since session 77, below). Half the training scenes are read
 # without their traffic-light states, as most real recordings come (two hours, seeds 0 and 1: held-out synthetic
 # ensembles 94-96 -> 98-99%, V-Max 0.933-0.936 -> 0.954-0.970;
@@ -421,11 +421,13 @@ def _check_algorithm(name: str, algo: str, what: str) -> str:
 # its hour's end (944k); seeds 5 and 6, 100.0% / 0.941 and 86.2% / 0.909 at their ends. A run trains the same
 # steps either way (nothing in the preset reads the total), so the hour now ends at the 500k checkpoint, in ~30
 # minutes on a 2-core AMD VM.
+DAGGER_ENV_STEPS = 500_000
 DAGGER_OVERRIDES = (
     "train.teacher=pdm_state", "train.traffic=idm_follow", "algo.student_drive=0.5", "algo.student_mix=episode",
-    "algo.updates_per_step=4", "obs.object_selection=route", "algo.buffer_size=500000",
+    "algo.updates_per_step=4", "obs.object_selection=route",
+    f"algo.buffer_size={DAGGER_ENV_STEPS}", f"train.total_env_steps={DAGGER_ENV_STEPS}",  # the buffer holds the run
     "data.synthetic.junction_parking=0.6", "data.synthetic.max_parked=40", "data.synthetic.parked_fraction=0.4,0.9",
-    "data.synthetic.sdc_slow_start=1", "data.synthetic.traffic_density=1.5", "train.total_env_steps=500000",
+    "data.synthetic.sdc_slow_start=1", "data.synthetic.traffic_density=1.5",
     "train.eval_every=100000", "train.checkpoint_every=100000", "env.dynamics=bicycle_no_reverse", "train.ensemble=4",
     "data.hide_lights=0.5", "data.hide_lights_from=all", "obs.noise.map_dropout=0.25", "train.brake_guard_ttc=2",
     "obs.object_route_frame=true")
