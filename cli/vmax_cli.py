@@ -84,26 +84,37 @@ def bench(as_json, batch_sizes, steps, quick, env_kind, compare_waymax):
         _fail(one_line(error))
 
 
+def _run_evaluator(brake_guard: tuple[float, bool] | None):
+    """evaluate_run driving with --brake-guard's guard (None: each run's own)."""
+    from vmax_sim.training.run_policy import evaluate_run
+
+    if brake_guard is None:
+        return evaluate_run
+    return functools.partial(evaluate_run, brake_guard_ttc=brake_guard[0], brake_guard_hold=brake_guard[1])
+
+
 def _env_kinds(choice: str) -> tuple[str, ...]:
     return ("real", "minimal") if choice == "both" else (choice,)
 
 
-def _brake_guard_option(ctx, param, value: str) -> float | None:
-    """--brake-guard: "run" -> None (the run's own setting), "off" -> 0.0, else seconds (train.brake_guard_ttc's
-    range)."""
+def _brake_guard_option(ctx, param, value: str) -> tuple[float, bool] | None:
+    """--brake-guard: "run" -> None (the run's own setting), "off" -> (0.0, False), else seconds in
+    train.brake_guard_ttc's range, "+hold" after them for train.brake_guard_hold -> (seconds, hold)."""
     from vmax_sim.training.config import BRAKE_GUARD_MAX_TTC_S
 
     if value == "run":
         return None
     if value == "off":
-        return 0.0
+        return 0.0, False
+    number, hold = (value[:-len("+hold")], True) if value.endswith("+hold") else (value, False)
     try:
-        seconds = float(value)
+        seconds = float(number)
     except ValueError:
         seconds = float("nan")
-    if not 0.0 <= seconds <= BRAKE_GUARD_MAX_TTC_S:
-        raise click.BadParameter(f"expected run, off or seconds from 0 to {BRAKE_GUARD_MAX_TTC_S:g}, got {value!r}")
-    return seconds
+    if not 0.0 < seconds <= BRAKE_GUARD_MAX_TTC_S and not (seconds == 0.0 and not hold):
+        raise click.BadParameter(f"expected run, off, or seconds above 0 up to {BRAKE_GUARD_MAX_TTC_S:g} with an "
+                                 f"optional +hold (2+hold), got {value!r}")
+    return seconds, hold
 
 
 def _check_options(fn):
@@ -257,14 +268,15 @@ def train(preset, data, eval_data, out, resume_dir, quiet, coordinator, num_proc
                    "directory when one is given).")
 @click.option("--view-max", type=click.IntRange(1), default=8, show_default=True,
               help="Scenarios on the --view page.")
-@click.option("--brake-guard", "brake_guard_ttc", default="run", show_default=True, callback=_brake_guard_option,
+@click.option("--brake-guard", "brake_guard", default="run", show_default=True, callback=_brake_guard_option,
               help="Training run directories drive with PDM-Closed's emergency brake over their acceleration as "
-                   "the run says (run: its train.brake_guard_ttc), without it (off: the student alone), or with "
-                   "this time-to-collision threshold in seconds (0-10): the same weights with and without it.")
+                   "the run says (run: its train.brake_guard_ttc and brake_guard_hold), without it (off: the "
+                   "student alone), or with this time-to-collision threshold in seconds (0-10), +hold to also cap "
+                   "the acceleration where it would lead within it (2+hold): the same weights with and without it.")
 @_check_options
 def evaluate(policy, data, mode, agents, max_agents, agents_follow_log, perturb_sigma, batch_size, num_scenarios,
              num_objects, seed, as_json, out, quiet, gallery_dir, gallery_max, gallery_passed, difficulty, view_file,
-             view_max, brake_guard_ttc, deep, skip_checks):
+             view_max, brake_guard, deep, skip_checks):
     """Closed-loop evaluation: accuracy, nuPlan and V-Max scores; several policies give one comparison table."""
     from vmax_sim.evaluation import format_summary
     from vmax_sim.evaluation.evaluate import partial_note
@@ -279,7 +291,6 @@ def evaluate(policy, data, mode, agents, max_agents, agents_follow_log, perturb_
         write_report,
     )
     from vmax_sim.training.interrupt import StopRequests
-    from vmax_sim.training.run_policy import evaluate_run
     from vmax_sim.visualization.view import run_data
 
     if mode == "selfplay":
@@ -293,7 +304,7 @@ def evaluate(policy, data, mode, agents, max_agents, agents_follow_log, perturb_
         if traffic is not None:
             mode = dataclasses.replace(mode, agents="learned", agent_policy=traffic, agent_run=agents)
         entries = split_policies(policy)
-        if brake_guard_ttc is not None and not any(is_run_directory(entry) for entry in entries):
+        if brake_guard is not None and not any(is_run_directory(entry) for entry in entries):
             raise InputError("--brake-guard acts on training run directories; --policy names none")
         _check_data([data or ""], deep, skip_checks, quiet)  # without --data a run's held-out split is checked as read
         out_dir = out if out and not out.endswith(".json") else None
@@ -304,7 +315,7 @@ def evaluate(policy, data, mode, agents, max_agents, agents_follow_log, perturb_
             runs = compare_policies(entries, data, mode, num_scenarios=num_scenarios, batch_size=batch_size,
                                     num_objects=num_objects, seed=seed, progress=not quiet,  # stderr: --json clean
                                     print_fn=lambda line: click.echo(line, err=True), on_batch=extras.on_batch,
-                                    run_evaluator=functools.partial(evaluate_run, brake_guard_ttc=brake_guard_ttc),
+                                    run_evaluator=_run_evaluator(brake_guard),
                                     stop=stop)
         summaries = {run.name: run.result.summary for run in runs}
         if len(runs) == 1:

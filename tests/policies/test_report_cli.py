@@ -54,10 +54,13 @@ def test_unknown_entries_and_missing_data_are_one_line_errors(tmp_path):
 def test_brake_guard_option_refuses_bad_values_and_policies_that_are_not_runs(policy_shards):
     wrong = CliRunner().invoke(main, ["evaluate", "--policy", "idm", "--data", str(policy_shards),
                                       "--brake-guard", "soon"])
-    assert wrong.exit_code == 2 and "--brake-guard" in wrong.output and "expected run, off or seconds" in wrong.output
+    assert wrong.exit_code == 2 and "--brake-guard" in wrong.output and "expected run, off, or seconds" in wrong.output
     too_long = CliRunner().invoke(main, ["evaluate", "--policy", "idm", "--data", str(policy_shards),
                                          "--brake-guard", "11"])
     assert too_long.exit_code == 2 and "got '11'" in too_long.output
+    no_guard_to_shape = CliRunner().invoke(main, ["evaluate", "--policy", "idm", "--data", str(policy_shards),
+                                                  "--brake-guard", "0+hold"])
+    assert no_guard_to_shape.exit_code == 2 and "got '0+hold'" in no_guard_to_shape.output
     no_run = CliRunner().invoke(main, ["evaluate", "--policy", "idm,pdm", "--data", str(policy_shards),
                                        "--brake-guard", "off"])
     assert no_run.exit_code == 2

@@ -134,6 +134,7 @@ def test_the_dagger_preset_is_the_documented_bc_recipe_and_overrides_still_apply
     assert config.obs.noise.map_dropout == 0.25 and config.obs.noise.active
     # PDM-Closed's emergency brake over the student where it drives, and its name says so (docs/learning.md)
     assert config.train.brake_guard_ttc == 2.0 and policy_name(config) == "bc-mlp+guard"
+    assert config.train.brake_guard_hold  # ... which also stops it speeding up into what is ahead (session 79)
     # objects read along and across the SDC's route (sessions 66-68: two guarded hours, seeds 0 and 2)
     assert config.obs.object_route_frame and not preset_config("bc").obs.object_route_frame
     assert preset_config("dagger") == config

@@ -133,6 +133,10 @@ def test_cli_train_then_evaluate_the_run(synthetic_shards, tmp_path):
                    "--brake-guard", "2", "--json")
     assert guarded.returncode == 0, guarded.stderr
     assert json.loads(guarded.stdout)["policy"] == "bc-mlp+guard@cli-run"
+    held = _cli("evaluate", "--policy", str(run), "--data", str(synthetic_shards), "--num-scenarios", "4",
+                "--brake-guard", "2+hold", "--json")
+    assert held.returncode == 0, held.stderr
+    assert json.loads(held.stdout)["policy"] == "bc-mlp+guard@cli-run"
     plain = _cli("evaluate", "--policy", str(run), "--data", str(synthetic_shards), "--num-scenarios", "4",
                  "--brake-guard", "off", "--json")
     assert json.loads(plain.stdout)["policy"] == "bc-mlp@cli-run"

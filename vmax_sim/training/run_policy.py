@@ -49,16 +49,18 @@ class LoadedPolicy:
     learner: object  # whose act takes `params` (an ensemble's: the members' mean action, params stacked)
 
 
-def load_trained_policy(run_dir: str | Path, step: int | None = None,
-                        brake_guard_ttc: float | None = None) -> LoadedPolicy:
+def load_trained_policy(run_dir: str | Path, step: int | None = None, brake_guard_ttc: float | None = None,
+                        brake_guard_hold: bool = False) -> LoadedPolicy:
     """The policy of a training run directory at its latest (or the given) checkpoint; of an ensemble directory
     (RUN/ensemble, `train.ensemble`), all its members driving as one (`train.ensemble_rule`). brake_guard_ttc:
-    None drives with the run's own `train.brake_guard_ttc`; a number in its place (0: the student alone), so the
-    same weights can be evaluated with and without the guard."""
+    None drives with the run's own `train.brake_guard_ttc` and `train.brake_guard_hold`; a number in its place (0: the
+    student alone) drives with that guard, holding as brake_guard_hold says, so the same weights can be evaluated
+    with and without the guard."""
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
     if brake_guard_ttc is not None:
-        config = apply_overrides(config, [f"train.brake_guard_ttc={brake_guard_ttc}"])
+        hold = brake_guard_hold and brake_guard_ttc > 0
+        config = apply_overrides(config, [f"train.brake_guard_ttc={brake_guard_ttc}", f"train.brake_guard_hold={hold}"])
     store = CheckpointStore(run_dir / "checkpoints")
     env, learner = components(config)
     name = f"{policy_name(config)}@{run_dir.name}"
@@ -101,12 +103,13 @@ def _window_points(config) -> int:
 
 def evaluate_run(run_dir: str | Path, data: str | None = None, mode: str = "non_reactive",
                  num_scenarios: int | None = None, batch_size: int = 8, step: int | None = None, on_batch=None,
-                 progress: bool = False, stop=None, brake_guard_ttc: float | None = None):
+                 progress: bool = False, stop=None, brake_guard_ttc: float | None = None,
+                 brake_guard_hold: bool = False):
     """Evaluates a training run's policy on `data` (default: the run's held-out split), with the run's
     observation and environment settings. `progress`: the scenarios done of the total on stderr. `stop`: a
     flag with `requested` (vmax_sim.evaluation.evaluate): once set, the result covers the batches done.
-    brake_guard_ttc: as `load_trained_policy`'s."""
-    loaded = load_trained_policy(run_dir, step, brake_guard_ttc)
+    brake_guard_ttc, brake_guard_hold: as `load_trained_policy`'s."""
+    loaded = load_trained_policy(run_dir, step, brake_guard_ttc, brake_guard_hold)
     config = loaded.config
     # notes go to stderr: stdout may be carrying `evaluate --json`
     path = data or resolve_eval_data(config, lambda line: print(line, file=sys.stderr))
