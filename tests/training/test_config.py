@@ -121,7 +121,9 @@ def test_defaults_are_what_learns_best_here_and_paper_keeps_the_paper():
 def test_the_dagger_preset_is_the_documented_bc_recipe_and_overrides_still_apply():
     config = preset_config("bc-dagger")
     assert (config.algo, config.network.name) == ("bc", "mlp")
-    assert (config.train.teacher, config.train.traffic) == ("pdm_state", "idm_follow")  # sessions 47-48
+    assert (config.train.teacher, config.train.traffic) == ("pdm_state", "idm_follow_pass")  # sessions 47-48, 79
+    # parked cars up to 1.5 m nearer the lanes, which that traffic passes: the student creeps less past them (s79)
+    assert config.data.synthetic.parked_reach == (0.0, 1.5)
     assert (config.algo_config.student_drive, config.algo_config.student_mix) == (0.5, "episode")
     assert config.algo_config.updates_per_step == 4  # half of BC's: steadier on real scenes (docs/learning.md)
     assert config.algo_config.buffer_size == 500_000 and config.obs.object_selection == "route"  # = its steps
