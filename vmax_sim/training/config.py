@@ -249,7 +249,7 @@ class TrainConfig:
 
 
 def brake_guard(config: TrainConfig) -> BrakeGuard | None:
-    """The brake guard over the run's policy (train.brake_guard_ttc), or None."""
+    """The brake guard over the run's policy (train.brake_guard_ttc, train.brake_guard_hold), or None."""
     ttc = config.train.brake_guard_ttc
     return BrakeGuard(ttc_s=ttc, hold=config.train.brake_guard_hold) if ttc > 0 else None
 
