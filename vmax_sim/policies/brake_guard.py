@@ -59,7 +59,7 @@ def emergency_acceleration(ego: Ego, boxes: jax.Array, vel: jax.Array, valid: ja
         return braked
     reached = jnp.maximum(ego.speed + accel * guard.ttc_s, 0.0)  # the speed the action leads to, held for ttc_s
     ttc_reached = time_to_collision(ego_box, reached * heading, boxes, vel, valid, guard.ttc_s)
-    return jnp.where((ttc >= guard.ttc_s) & (ttc_reached < guard.ttc_s), jnp.minimum(accel, 0.0), braked)
+    return jnp.where(ttc_reached < guard.ttc_s, jnp.minimum(braked, 0.0), braked)  # a braking `braked` stays
 
 
 def guarded_acceleration(state: SimulatorState, accel: jax.Array, guard: BrakeGuard) -> jax.Array:

@@ -54,13 +54,13 @@ def load_trained_policy(run_dir: str | Path, step: int | None = None, brake_guar
     """The policy of a training run directory at its latest (or the given) checkpoint; of an ensemble directory
     (RUN/ensemble, `train.ensemble`), all its members driving as one (`train.ensemble_rule`). brake_guard_ttc:
     None drives with the run's own `train.brake_guard_ttc` and `train.brake_guard_hold`; a number in its place (0: the
-    student alone) drives with that guard, holding as brake_guard_hold says, so the same weights can be evaluated
-    with and without the guard."""
+    student alone; no hold then) drives with that guard, holding as brake_guard_hold says, so the same weights can be
+    evaluated with and without the guard."""
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
     if brake_guard_ttc is not None:
-        hold = brake_guard_hold and brake_guard_ttc > 0
-        config = apply_overrides(config, [f"train.brake_guard_ttc={brake_guard_ttc}", f"train.brake_guard_hold={hold}"])
+        config = apply_overrides(config, [f"train.brake_guard_ttc={brake_guard_ttc}",
+                                          f"train.brake_guard_hold={brake_guard_hold}"])
     store = CheckpointStore(run_dir / "checkpoints")
     env, learner = components(config)
     name = f"{policy_name(config)}@{run_dir.name}"
