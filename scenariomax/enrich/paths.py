@@ -42,6 +42,7 @@ import math
 
 import numpy as np
 
+from scenariomax._compiled import kernels
 from scenariomax.enrich.geometry import (
     arc_lengths,
     point_at_arc,
@@ -171,6 +172,7 @@ class _TrackNearLanes:
         self._done: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._beside: dict[int, bool] = {}
         self._inside: np.ndarray | None = None  # (K, m) positions in each lane's grown box, on the first projection
+        self._far: tuple[np.ndarray, np.ndarray] | None = None
         # x and y apart: comparing (m, 2) and reducing over the 2-wide axis costs more than the test itself.
         self._x, self._y = track[:, 0], track[:, 1]
 
@@ -186,16 +188,27 @@ class _TrackNearLanes:
             self._beside[lane] = np.count_nonzero(self.of(lane)[0] < self.radius) >= 2
         return self._beside[lane]
 
+    def _far_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(inf, nan) for every position: a lane whose grown box holds none (one pair, shared, read only)."""
+        if self._far is None:
+            self._far = (np.full(len(self.track), np.inf), np.full(len(self.track), np.nan))
+        return self._far
+
     def _project(self, lane: int) -> tuple[np.ndarray, np.ndarray]:
+        compiled = kernels()
+        if compiled is not None:  # the box test and the projection in one pass, the same values
+            line, _, _, sx, sy, seg_len2, cum = _segments(self.lanes, lane)
+            dist, arc, inside = compiled.track_on_lane(self.track, self.lanes.boxes[lane], self.radius, line, sx, sy,
+                                                       seg_len2, cum)
+            return (dist, arc) if inside else self._far_arrays()
         if self._inside is None:  # the box test of every lane at once: most lanes asked for lie away from the log
             boxes = self.lanes.boxes
             low, high = boxes[:, :2] - self.radius - 1.0, boxes[:, 2:] + self.radius + 1.0  # (K, 2)
             self._inside = ((self._x >= low[:, 0:1]) & (self._x <= high[:, 0:1]) & (self._y >= low[:, 1:2])
                             & (self._y <= high[:, 1:2]))  # (K, m)
-            self._far = (np.full(len(self.track), np.inf), np.full(len(self.track), np.nan))  # shared, read only
         near = np.flatnonzero(self._inside[lane])  # (k,)
         if not near.size:
-            return self._far
+            return self._far_arrays()
         dist, arc = np.full(len(self.track), np.inf), np.full(len(self.track), np.nan)
         # Each position's projection is computed on its own: a subset gives the same values.
         dist[near], arc[near], _ = project_to_polyline(self.track[near], self.lanes.polyline(lane),

@@ -15,6 +15,8 @@ import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from google.protobuf.message import DecodeError
 
+from scenariomax._compiled import kernels
+
 _PACKAGE = "vmax.tfexample"
 _F = descriptor_pb2.FieldDescriptorProto
 
@@ -131,6 +133,15 @@ def varints(values: np.ndarray) -> bytes:
     v = np.ascontiguousarray(values, np.int64).view(np.uint64)  # (n,)
     if v.size == 0:
         return b""
+    compiled = kernels()
+    if compiled is not None:  # the same bytes as below: the padding at the end is one varint repeated
+        head = compiled.trailing_run(v)
+        return compiled.varint_bytes(v[:head]).tobytes() + _varint(int(v[-1])) * (len(v) - head)
+    return _varints_numpy(v)
+
+
+def _varints_numpy(v: np.ndarray) -> bytes:
+    """`varints` in numpy (where numba is missing; the reference the kernel is tested against). v (n >= 1,) uint64"""
     # Shard arrays end in padding (-1: 10 bytes each): the trailing run of one value is one varint repeated.
     differs = np.flatnonzero(v != v[-1])  # (k,)
     head = int(differs[-1]) + 1 if differs.size else 0

@@ -1,0 +1,287 @@
+"""Compiled loops (numba) for the hot spots of conversion: the nearest-segment search of the path search and the
+varints of the record encoder. Imported only through `scenariomax._compiled.kernels()` (numba takes ~0.5 s to
+import): never import this module directly.
+
+Each kernel gives the same bits as the numpy code it stands in for (`enrich.geometry`, `io.example`): the same
+IEEE operations in the same order on float64 scalars (numba contracts nothing into fused multiply-adds without
+fastmath), the first of equal minima as `argmin`, NaN where numpy's `maximum`, `clip` and `argmin` give it.
+Tests compare every kernel with the numpy code on random and real inputs.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+_CHUNK = 8  # segments per bounding box of the pruned scan
+_PRUNE_FROM = 32  # segments from which a polyline is scanned chunk by chunk
+
+
+@numba.njit(cache=True, nogil=True)
+def _box_gap2(px: float, py: float, low_x: float, low_y: float, high_x: float, high_y: float) -> float:
+    """Squared distance from a point to a box (0 inside)."""
+    gx = max(max(low_x - px, px - high_x), 0.0)
+    gy = max(max(low_y - py, py - high_y), 0.0)
+    return gx * gx + gy * gy
+
+
+@numba.njit(cache=True, nogil=True)
+def _scan(px, py, line, sx, sy, seg_len2, first, stop, prune, low, high):
+    """Nearest segment of one point among segments [first, stop): (index, frac, foot x, foot y, squared distance),
+    as `geometry._feet` and `argmin` give them (segment j: from line[j] along (sx[j], sy[j])). `prune`: skip the
+    chunks of `_CHUNK` segments (boxes `low`/`high` (C, 2), chunk c holding segments first + c * _CHUNK ...) whose
+    box lies further than the best so far."""
+    best, best_frac, best_x, best_y, best_d2 = -1, 0.0, 0.0, 0.0, 0.0
+    j = first
+    while j < stop:
+        if prune and (j - first) % _CHUNK == 0 and best >= 0:
+            c = (j - first) // _CHUNK
+            # The margin covers rounding: a skipped chunk holds no segment at or below the best (ties keep the
+            # earlier index anyway, as argmin does).
+            if _box_gap2(px, py, low[c, 0], low[c, 1], high[c, 0], high[c, 1]) > best_d2 * (1.0 + 1e-9) + 1e-9:
+                j += _CHUNK
+                continue
+        ax, ay = line[j, 0], line[j, 1]
+        frac = (px - ax) * sx[j]
+        frac += (py - ay) * sy[j]
+        frac /= seg_len2[j]
+        if frac < 0.0:  # np.clip: NaN stays NaN
+            frac = 0.0
+        elif frac > 1.0:
+            frac = 1.0
+        foot_x = frac * sx[j] + ax
+        foot_y = frac * sy[j] + ay
+        dx = px - foot_x
+        dy = py - foot_y
+        d2 = dx * dx + dy * dy
+        if best < 0 or d2 < best_d2 or (d2 != d2 and best_d2 == best_d2):  # argmin: the first NaN wins
+            best, best_frac, best_x, best_y, best_d2 = j, frac, foot_x, foot_y, d2
+            if d2 != d2:
+                break
+        j += 1
+    return best, best_frac, best_x, best_y, best_d2
+
+
+@numba.njit(cache=True, nogil=True)
+def _chunk_boxes(line, first, stop):
+    """Bounding boxes of the chunks of segments [first, stop) of `line` (vertices first .. stop inclusive). -> (C, 2)
+    low, (C, 2) high"""
+    num = (stop - first + _CHUNK - 1) // _CHUNK
+    low = np.empty((num, 2))
+    high = np.empty((num, 2))
+    for c in range(num):
+        begin = first + c * _CHUNK
+        end = min(begin + _CHUNK, stop)  # the chunk's last vertex (its last segment's end)
+        for d in range(2):
+            lo = line[begin, d]
+            hi = lo
+            for v in range(begin + 1, end + 1):
+                lo = min(lo, line[v, d])
+                hi = max(hi, line[v, d])
+            low[c, d] = lo
+            high[c, d] = hi
+    return low, high
+
+
+@numba.njit(cache=True, nogil=True)
+def _all_finite(values) -> bool:
+    for v in values.ravel():
+        if not np.isfinite(v):
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def nearest_on_polyline(pts, line, sx, sy, seg_len2, cum, with_foot):
+    """`geometry.project_to_polyline` after `polyline_segments`: distance (m,), foot arc (m,), foot (m, 2) (zeros
+    unless `with_foot`). pts (m, 2), line (n >= 2, 2)."""
+    m, k = pts.shape[0], sx.shape[0]
+    dist = np.empty(m)
+    arc = np.empty(m)
+    foot = np.zeros((m, 2) if with_foot else (0, 2))
+    prune = k >= _PRUNE_FROM and _all_finite(pts) and _all_finite(line)
+    low, high = _chunk_boxes(line, 0, k) if prune else (np.empty((0, 2)), np.empty((0, 2)))
+    for i in range(m):
+        best, frac, foot_x, foot_y, d2 = _scan(pts[i, 0], pts[i, 1], line, sx, sy, seg_len2, 0, k, prune, low, high)
+        arc[i] = cum[best] + frac * np.sqrt(seg_len2[best])
+        dist[i] = np.sqrt(d2)
+        if with_foot:
+            foot[i, 0] = foot_x
+            foot[i, 1] = foot_y
+    return dist, arc, foot
+
+
+@numba.njit(cache=True, nogil=True)
+def nearest_on_polylines(pts, vertex, counts):
+    """`geometry.project_to_polylines` for polylines of >= 2 vertices stored back to back (`vertex` (V, 2), vertices
+    per polyline `counts` (L,)): distance (L, m), foot arc (L, m). Segments and arc lengths as
+    `polyline_segments` builds them for each polyline."""
+    m, num_lines = pts.shape[0], counts.shape[0]
+    dist = np.empty((num_lines, m))
+    arc = np.empty((num_lines, m))
+    finite = _all_finite(pts) and _all_finite(vertex)
+    start = 0
+    for line_index in range(num_lines):
+        n = counts[line_index]
+        line = vertex[start:start + n]
+        start += n
+        k = n - 1
+        sx = np.empty(k)
+        sy = np.empty(k)
+        seg_len2 = np.empty(k)
+        cum = np.empty(n)
+        cum[0] = 0.0
+        for j in range(k):
+            sx[j] = line[j + 1, 0] - line[j, 0]
+            sy[j] = line[j + 1, 1] - line[j, 1]
+            raw = sx[j] * sx[j] + sy[j] * sy[j]
+            cum[j + 1] = cum[j] + np.sqrt(raw)  # np.cumsum: a sequential sum
+            seg_len2[j] = 1e-12 if raw < 1e-12 else raw  # np.maximum: NaN stays NaN
+        prune = k >= _PRUNE_FROM and finite
+        low, high = _chunk_boxes(line, 0, k) if prune else (np.empty((0, 2)), np.empty((0, 2)))
+        for i in range(m):
+            best, frac, _, _, d2 = _scan(pts[i, 0], pts[i, 1], line, sx, sy, seg_len2, 0, k, prune, low, high)
+            arc[line_index, i] = cum[best] + frac * np.sqrt(seg_len2[best])
+            dist[line_index, i] = np.sqrt(d2)
+    return dist, arc
+
+
+@numba.njit(cache=True, nogil=True)
+def trailing_run(values) -> int:
+    """Where the run of values equal to the last one starts (shard arrays end in padding). (n >= 1,) -> index"""
+    start = values.shape[0] - 1
+    while start > 0 and values[start - 1] == values[start]:
+        start -= 1
+    return start
+
+
+@numba.njit(cache=True, nogil=True)
+def varint_bytes(values):
+    """Packed protobuf varints of uint64 values (the bit patterns of int64s). (n,) -> (bytes,) uint8"""
+    low7, more, shift = np.uint64(0x7F), np.uint64(0x80), np.uint64(7)  # uint64 throughout (no float promotion)
+    size = 0
+    for i in range(values.shape[0]):
+        v = values[i]
+        size += 1
+        while v > low7:
+            v = v >> shift
+            size += 1
+    out = np.empty(size, np.uint8)
+    at = 0
+    for i in range(values.shape[0]):
+        v = values[i]
+        while v > low7:
+            out[at] = np.uint8((v & low7) | more)
+            v = v >> shift
+            at += 1
+        out[at] = np.uint8(v)
+        at += 1
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def track_on_lane(track, box, radius, line, sx, sy, seg_len2, cum):
+    """`paths._TrackNearLanes._project`: distance (m,) and foot arc (m,) of the logged positions `track` (m, 2) on
+    one lane, computed for the positions inside the lane's bounding box `box` (min x, min y, max x, max y) grown
+    by `radius` + 1 m (inf / nan elsewhere), and how many lie inside."""
+    m, k = track.shape[0], sx.shape[0]
+    dist = np.full(m, np.inf)
+    arc = np.full(m, np.nan)
+    low_x, low_y = box[0] - radius - 1.0, box[1] - radius - 1.0
+    high_x, high_y = box[2] + radius + 1.0, box[3] + radius + 1.0
+    prune = k >= _PRUNE_FROM and _all_finite(line)
+    low, high = _chunk_boxes(line, 0, k) if prune else (np.empty((0, 2)), np.empty((0, 2)))
+    inside = 0
+    for i in range(m):
+        px, py = track[i, 0], track[i, 1]
+        if not (px >= low_x and px <= high_x and py >= low_y and py <= high_y):
+            continue
+        inside += 1
+        best, frac, _, _, d2 = _scan(px, py, line, sx, sy, seg_len2, 0, k, prune and np.isfinite(px)
+                                     and np.isfinite(py), low, high)
+        arc[i] = cum[best] + frac * np.sqrt(seg_len2[best])
+        dist[i] = np.sqrt(d2)
+    return dist, arc, inside
+
+
+@numba.njit(cache=True, nogil=True)
+def arc_lengths(xy):
+    """`geometry.arc_lengths` of a float64 polyline (n, 2+): 0, then the running sum of the 2-D steps. -> (n,)"""
+    n = xy.shape[0]
+    out = np.zeros(n)
+    total = 0.0
+    for i in range(1, n):
+        dx = xy[i, 0] - xy[i - 1, 0]
+        dy = xy[i, 1] - xy[i - 1, 1]
+        step = np.sqrt(dx * dx + dy * dy)
+        total = step if i == 1 else total + step  # np.cumsum starts from the first value itself
+        out[i] = total
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def run_cumsum(values, counts):
+    """`geometry.run_cumsum`: np.cumsum within each run of `values` (n,) (runs of `counts` (R,), back to back)."""
+    out = np.empty_like(values)
+    at = 0
+    for r in range(counts.shape[0]):
+        total = 0.0
+        for i in range(counts[r]):
+            total = values[at] if i == 0 else total + values[at]
+            out[at] = total
+            at += 1
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def interp_columns(x, xp, fp):
+    """np.interp(x, xp, fp[:, k]) for every column k, bit for bit, by numpy's rule (compiled_base.c) for each query
+    with j the last index with xp[j] <= x: a one-point xp gives fp[0]; NaN stays NaN; left of xp: fp[0]; right of
+    it, at its last point or on xp[j] itself: fp[j]; else slope * (x - xp[j]) + fp[j], and where that is NaN (an
+    infinite slope) the same from xp[j + 1], else fp[j] when fp[j] == fp[j + 1].
+    x (m,), xp (n >= 1,), fp (n, d) -> (m, d), and whether it was computed: not where xp is not non-decreasing
+    (NaN included), where numpy's search may land on another j."""
+    m, n, d = x.shape[0], xp.shape[0], fp.shape[1]
+    out = np.empty((m, d))
+    for j in range(n - 1):
+        if not xp[j] <= xp[j + 1]:  # decreasing, or NaN: numpy's search may then land elsewhere
+            return out, False
+    for i in range(m):
+        value = x[i]
+        if n == 1:  # numpy's own case: fp[0] whatever x is (NaN included)
+            for k in range(d):
+                out[i, k] = fp[0, k]
+            continue
+        if value != value:
+            for k in range(d):
+                out[i, k] = value
+            continue
+        if value < xp[0]:
+            for k in range(d):
+                out[i, k] = fp[0, k]
+            continue
+        if value > xp[n - 1]:
+            for k in range(d):
+                out[i, k] = fp[n - 1, k]
+            continue
+        lo, hi = 0, n  # bisection: the first index with xp > value, minus one
+        while lo < hi:
+            mid = lo + ((hi - lo) >> 1)
+            if value >= xp[mid]:
+                lo = mid + 1
+            else:
+                hi = mid
+        j = lo - 1
+        if j == n - 1 or xp[j] == value:
+            for k in range(d):
+                out[i, k] = fp[j, k]
+            continue
+        for k in range(d):
+            slope = (fp[j + 1, k] - fp[j, k]) / (xp[j + 1] - xp[j])
+            result = slope * (value - xp[j]) + fp[j, k]
+            if result != result:
+                result = slope * (value - xp[j + 1]) + fp[j + 1, k]
+                if result != result and fp[j, k] == fp[j + 1, k]:
+                    result = fp[j, k]
+            out[i, k] = result
+    return out, True
