@@ -234,37 +234,26 @@ def run_cumsum(values, counts):
 
 
 @numba.njit(cache=True, nogil=True)
-def interp_columns(x, xp, fp):
-    """np.interp(x, xp, fp[:, k]) for every column k, bit for bit, by numpy's rule (compiled_base.c) for each query
-    with j the last index with xp[j] <= x: a one-point xp gives fp[0]; NaN stays NaN; left of xp: fp[0]; right of
-    it, at its last point or on xp[j] itself: fp[j]; else slope * (x - xp[j]) + fp[j], and where that is NaN (an
-    infinite slope) the same from xp[j + 1], else fp[j] when fp[j] == fp[j + 1].
-    x (m,), xp (n >= 1,), fp (n, d) -> (m, d), and whether it was computed: not where xp is not non-decreasing
-    (NaN included), where numpy's search may land on another j."""
-    m, n, d = x.shape[0], xp.shape[0], fp.shape[1]
-    out = np.empty((m, d))
-    for j in range(n - 1):
-        if not xp[j] <= xp[j + 1]:  # decreasing, or NaN: numpy's search may then land elsewhere
-            return out, False
-    for i in range(m):
-        value = x[i]
-        if n == 1:  # numpy's own case: fp[0] whatever x is (NaN included)
-            for k in range(d):
-                out[i, k] = fp[0, k]
-            continue
-        if value != value:
-            for k in range(d):
-                out[i, k] = value
-            continue
-        if value < xp[0]:
-            for k in range(d):
-                out[i, k] = fp[0, k]
-            continue
-        if value > xp[n - 1]:
-            for k in range(d):
-                out[i, k] = fp[n - 1, k]
-            continue
-        lo, hi = 0, n  # bisection: the first index with xp > value, minus one
+def _interp_into(out, i, value, xp, fp, first, n):
+    """out[i, :] = np.interp(value, xp[first:first + n], fp[first:first + n, k]) for every column k, bit for bit, by
+    numpy's rule (compiled_base.c) with j the last index with xp[j] <= value: a one-point xp gives fp[0]; NaN stays
+    NaN; left of xp: fp[0]; right of it, at its last point or on xp[j] itself: fp[j]; else slope * (value - xp[j])
+    + fp[j], and where that is NaN (an infinite slope) the same from xp[j + 1], else fp[j] when fp[j] == fp[j + 1].
+    xp non-decreasing there (numpy's search may land on another j elsewhere)."""
+    d = fp.shape[1]
+    last = first + n - 1
+    if n == 1:  # numpy's own case: fp[0] whatever the value is (NaN included)
+        j = first
+    elif value != value:
+        for k in range(d):
+            out[i, k] = value
+        return
+    elif value < xp[first]:
+        j = first
+    elif value >= xp[last]:
+        j = last
+    else:
+        lo, hi = first, last + 1  # bisection: the first index with xp > value, minus one
         while lo < hi:
             mid = lo + ((hi - lo) >> 1)
             if value >= xp[mid]:
@@ -272,16 +261,113 @@ def interp_columns(x, xp, fp):
             else:
                 hi = mid
         j = lo - 1
-        if j == n - 1 or xp[j] == value:
-            for k in range(d):
-                out[i, k] = fp[j, k]
-            continue
+    if j == last or xp[j] == value or value < xp[j]:
         for k in range(d):
-            slope = (fp[j + 1, k] - fp[j, k]) / (xp[j + 1] - xp[j])
-            result = slope * (value - xp[j]) + fp[j, k]
-            if result != result:
-                result = slope * (value - xp[j + 1]) + fp[j + 1, k]
-                if result != result and fp[j, k] == fp[j + 1, k]:
-                    result = fp[j, k]
-            out[i, k] = result
+            out[i, k] = fp[j, k]
+        return
+    for k in range(d):
+        slope = (fp[j + 1, k] - fp[j, k]) / (xp[j + 1] - xp[j])
+        result = slope * (value - xp[j]) + fp[j, k]
+        if result != result:
+            result = slope * (value - xp[j + 1]) + fp[j + 1, k]
+            if result != result and fp[j, k] == fp[j + 1, k]:
+                result = fp[j, k]
+        out[i, k] = result
+
+
+@numba.njit(cache=True, nogil=True)
+def _ordered(xp, first, n) -> bool:
+    """Whether xp[first:first + n] is non-decreasing (no NaN)."""
+    for j in range(first, first + n - 1):
+        if not xp[j] <= xp[j + 1]:
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def interp_columns(x, xp, fp):
+    """np.interp(x, xp, fp[:, k]) for every column k, bit for bit (`_interp_into`). x (m,), xp (n >= 1,), fp (n, d)
+    -> (m, d), and whether it was computed: not where xp is not non-decreasing (NaN included)."""
+    out = np.empty((x.shape[0], fp.shape[1]))
+    if not _ordered(xp, 0, xp.shape[0]):
+        return out, False
+    for i in range(x.shape[0]):
+        _interp_into(out, i, x[i], xp, fp, 0, xp.shape[0])
     return out, True
+
+
+@numba.njit(cache=True, nogil=True)
+def run_interp(x, x_run, xp, fp, counts):
+    """`geometry.run_interp`: np.interp(x[i], xp_r, fp_r[:, k]) against the run r = x_run[i] of xp (n,) and fp (n, d)
+    (runs of `counts` (R,) >= 1, back to back). -> (m, d), and whether it was computed (every run ordered)."""
+    out = np.empty((x.shape[0], fp.shape[1]))
+    starts = np.empty(counts.shape[0], np.int64)
+    at = 0
+    for r in range(counts.shape[0]):
+        starts[r] = at
+        if not _ordered(xp, at, counts[r]):
+            return out, False
+        at += counts[r]
+    for i in range(x.shape[0]):
+        r = x_run[i]
+        _interp_into(out, i, x[i], xp, fp, starts[r], counts[r])
+    return out, True
+
+
+@numba.njit(cache=True, nogil=True)
+def slice_polyline(polyline, cum, start, stop):
+    """`geometry.slice_polyline` for start < stop (already clamped to the polyline): the interpolated start, the
+    vertices strictly between, the interpolated stop. polyline (n >= 1, d), cum (n,) -> (k, d), and whether it
+    was computed (not where cum is not non-decreasing: the vertices between would not be one run)."""
+    n, d = polyline.shape
+    if not _ordered(cum, 0, n):
+        return np.empty((0, d)), False
+    first = 0
+    while first < n and not cum[first] > start:
+        first += 1
+    inner = 0
+    while first + inner < n and cum[first + inner] < stop:
+        inner += 1
+    out = np.empty((inner + 2, d))
+    _interp_into(out, 0, start, cum, polyline, 0, n)
+    for i in range(inner):
+        for k in range(d):
+            out[1 + i, k] = polyline[first + i, k]
+    _interp_into(out, inner + 1, stop, cum, polyline, 0, n)
+    return out, True
+
+
+@numba.njit(cache=True, nogil=True)
+def resample_path(xyz, lane, spacing, max_points):
+    """`paths._resample` after the pieces are joined: the points (n, 3) with lane indices (n,) resampled every
+    `spacing` along their 2-D arc length, at most `max_points`, repeated points (a step <= 1e-6 m) dropped first.
+    xyz (n >= 1, 3) float64 -> points (q, 3), lane index of each (q,), and whether they were computed (not where the
+    length is not finite: np.arange refuses it)."""
+    n = xyz.shape[0]
+    cum = arc_lengths(xyz)
+    keep = np.empty(n, np.bool_)
+    keep[0] = True
+    for i in range(1, n):
+        keep[i] = cum[i] - cum[i - 1] > 1e-6
+    kept = np.flatnonzero(keep)
+    points, lanes, arcs = xyz[kept], lane[kept], cum[kept]
+    if points.shape[0] <= 1:
+        return points[:1].copy(), lanes[:1].copy(), True
+    total = min(arcs[-1], (max_points - 1) * spacing)
+    if not np.isfinite(total):
+        return points[:0].copy(), lanes[:0].copy(), False
+    count = min(int(np.ceil((total + 1e-6) / spacing)), max_points)  # np.arange(0, total + 1e-6, spacing)[:max]
+    out = np.empty((count, points.shape[1]))
+    out_lane = np.empty(count, lane.dtype)
+    for i in range(count):
+        target = i * spacing  # np.arange's values from 0: i * step
+        _interp_into(out, i, target, arcs, points, 0, arcs.shape[0])
+        lo, hi = 0, arcs.shape[0]  # np.searchsorted(arcs, target, "right") - 1, at least 0
+        while lo < hi:
+            mid = lo + ((hi - lo) >> 1)
+            if target >= arcs[mid]:
+                lo = mid + 1
+            else:
+                hi = mid
+        out_lane[i] = lanes[max(lo - 1, 0)]
+    return out, out_lane, True

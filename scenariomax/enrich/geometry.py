@@ -323,6 +323,11 @@ def slice_polyline(polyline: np.ndarray, cum: np.ndarray, start: float, stop: fl
     start, stop = max(float(start), 0.0), min(float(stop), float(cum[-1]))
     if stop <= start:
         return point_at_arc(polyline, cum, [start])
+    compiled = kernels()
+    if compiled is not None and polyline.ndim == 2 and len(polyline) == len(cum) and polyline.dtype == np.float64:
+        out, ok = compiled.slice_polyline(polyline, np.asarray(cum, np.float64), start, stop)  # the same values
+        if ok:
+            return out
     inner = (cum > start) & (cum < stop)
     ends = point_at_arc(polyline, cum, [start, stop])  # both ends in one call (np.interp is per element)
     return np.concatenate([ends[:1], polyline[inner], ends[1:]])
@@ -420,6 +425,12 @@ def run_interp(x: np.ndarray, x_run: np.ndarray, xp: np.ndarray, fp: np.ndarray,
     -> (m,) or (m, d)"""
     x = np.asarray(x, np.float64)
     xp, fp = np.asarray(xp, np.float64), np.asarray(fp, np.float64)
+    compiled = kernels()
+    if compiled is not None:  # the same bits, each query searched in its own run
+        out, ok = compiled.run_interp(x, np.asarray(x_run, np.int64), xp,
+                                      np.ascontiguousarray(fp.reshape(len(fp), -1)), np.asarray(counts, np.int64))
+        if ok:
+            return out if fp.ndim == 2 else out[:, 0]
     starts = run_starts(counts)
     last = starts + np.asarray(counts, np.int64) - 1  # (R,)
     j = _last_at_or_below(x, x_run, xp, np.repeat(np.arange(len(starts)), counts), starts)

@@ -150,6 +150,57 @@ def test_interpolation_with_infinite_and_repeated_knots_is_numpys():
     assert not computed  # not ordered: left to numpy
 
 
+def test_interpolation_per_run_is_numpys():
+    rng = np.random.default_rng(8)
+    for _ in range(300):
+        counts = rng.integers(1, 20, size=int(rng.integers(1, 12)))
+        xp = np.concatenate([np.sort(np.round(rng.normal(size=c) * 4)) for c in counts])  # repeated knots
+        fp = rng.normal(size=(len(xp), 2)) * 50
+        if rng.random() < 0.2:
+            fp[rng.integers(0, len(fp))] = np.inf
+        x_run = rng.integers(0, len(counts), size=60)
+        x = np.where(rng.random(60) < 0.1, np.nan, rng.normal(size=60) * 6)
+        parts = np.split(np.arange(len(xp)), np.cumsum(counts)[:-1])
+        want = np.array([[np.interp(x[i], xp[parts[r]], fp[parts[r], k]) for k in range(2)]
+                         for i, r in enumerate(x_run)])
+        np.testing.assert_array_equal(geometry.run_interp(x, x_run, xp, fp, counts), want)
+        np.testing.assert_array_equal(geometry.run_interp(x, x_run, xp, fp[:, 0], counts), want[:, 0])
+
+
+def test_slices_and_resampled_paths_are_numpys(monkeypatch):
+    from scenariomax.enrich.paths import PathSettings, _Piece, _resample
+
+    rng = np.random.default_rng(9)
+    cases = []
+    for _ in range(200):
+        line = _awkward_polyline(rng, int(rng.integers(1, 60)))
+        cum = geometry.arc_lengths(line)
+        bounds = sorted(rng.uniform(-3.0, cum[-1] + 3.0, size=2))
+        pieces = []
+        for lane in range(int(rng.integers(1, 4))):
+            xyz = _awkward_polyline(rng, int(rng.integers(1, 40)))
+            pieces.append(_Piece(xyz, np.full(len(xyz), lane)))
+        settings = PathSettings(spacing_m=float(rng.choice([0.5, 1.0, 2.0])), points_per_path=int(rng.integers(2, 90)))
+        cases.append((line, cum, bounds, tuple(pieces), settings))
+
+    def run():
+        return [(geometry.slice_polyline(line, cum, *bounds), _resample(pieces, settings))
+                for line, cum, bounds, pieces, settings in cases]
+
+    compiled = run()
+    monkeypatch.setenv(_compiled.DISABLE_ENV, "1")
+    _compiled.kernels.cache_clear()
+    try:
+        plain = run()
+    finally:
+        monkeypatch.delenv(_compiled.DISABLE_ENV)
+        _compiled.kernels.cache_clear()
+    for (cut, path), (want_cut, want_path) in zip(compiled, plain):
+        np.testing.assert_array_equal(cut, want_cut)
+        np.testing.assert_array_equal(path.xyz, want_path.xyz)
+        np.testing.assert_array_equal(path.lane, want_path.lane)
+
+
 def test_varints_are_numpys():
     rng = np.random.default_rng(1)
     for case in range(500):
