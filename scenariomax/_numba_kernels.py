@@ -371,3 +371,23 @@ def resample_path(xyz, lane, spacing, max_points):
                 hi = mid
         out_lane[i] = lanes[max(lo - 1, 0)]
     return out, out_lane, True
+
+
+@numba.njit(cache=True, nogil=True)
+def segment_vectors(line):
+    """`geometry.polyline_segments` after the 2-D line (n >= 2, 2): segment vectors sx, sy (n-1,), squared lengths
+    clamped to 1e-12 (n-1,), arc length at each vertex (n,)."""
+    k = line.shape[0] - 1
+    sx = np.empty(k)
+    sy = np.empty(k)
+    seg_len2 = np.empty(k)
+    cum = np.empty(k + 1)
+    cum[0] = 0.0
+    for j in range(k):
+        sx[j] = line[j + 1, 0] - line[j, 0]
+        sy[j] = line[j + 1, 1] - line[j, 1]
+        raw = sx[j] * sx[j] + sy[j] * sy[j]
+        step = np.sqrt(raw)
+        cum[j + 1] = step if j == 0 else cum[j] + step  # np.cumsum starts from the first value itself
+        seg_len2[j] = 1e-12 if raw < 1e-12 else raw  # np.maximum: NaN stays NaN
+    return sx, sy, seg_len2, cum

@@ -150,6 +150,9 @@ def polyline_segments(polyline: np.ndarray) -> tuple[np.ndarray, ...]:
     arc length at each vertex (n,). Kept by callers that project onto the same polyline again and again."""
     line = np.ascontiguousarray(np.asarray(polyline, np.float64)[:, :2])  # contiguous: one kernel signature
     ax, ay = line[:-1, 0], line[:-1, 1]  # (n-1,) segment starts
+    compiled = kernels()
+    if compiled is not None and len(line) >= 2:  # the same bits, one pass
+        return (line, ax, ay, *compiled.segment_vectors(line))
     sx, sy = line[1:, 0] - ax, line[1:, 1] - ay  # (n-1,) segment vectors
     raw_len2 = sx * sx + sy * sy  # (n-1,)
     cum = np.zeros(len(line))  # arc_lengths(line), from the segment lengths at hand

@@ -62,6 +62,24 @@ def test_projection_onto_one_polyline_is_numpys(seed):
                 assert (a is None and b is None) or np.array_equal(a, b)
 
 
+def test_polyline_segments_are_numpys(monkeypatch):
+    rng = np.random.default_rng(4)
+    lines = [_awkward_polyline(rng, int(rng.integers(2, 90))) for _ in range(200)]
+    lines[0][3] = np.nan
+    compiled = [geometry.polyline_segments(line) for line in lines]
+    monkeypatch.setenv(_compiled.DISABLE_ENV, "1")
+    _compiled.kernels.cache_clear()
+    try:
+        plain = [geometry.polyline_segments(line) for line in lines]
+    finally:
+        monkeypatch.delenv(_compiled.DISABLE_ENV)
+        _compiled.kernels.cache_clear()
+    for got, want in zip(compiled, plain):
+        assert len(got) == len(want) == 7
+        for a, b in zip(got, want):
+            np.testing.assert_array_equal(a, b)
+
+
 def test_projection_with_non_finite_points_is_numpys():
     rng = np.random.default_rng(7)
     line = _awkward_polyline(rng, 60)
