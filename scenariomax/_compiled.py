@@ -1,6 +1,10 @@
 """Where the compiled kernels come from: `kernels()` gives `scenariomax._numba_kernels` (imported on first use: numba
-takes ~0.5 s to import and the CLI's other commands never need it), or None where numba is not installed or
-`SCENARIOMAX_NO_NUMBA=1` is set. Callers fall back to their numpy code, which gives the same bits, only slower."""
+takes ~0.5 s to import and the CLI's other commands never need it), or None where numba is not installed or cannot
+cache its code, or `SCENARIOMAX_NO_NUMBA=1` is set. Callers fall back to their numpy code, which gives the same
+bits, only slower.
+
+A process pays ~1 s the first time it calls a kernel (numba's start and its cached code loaded); the very first
+conversion after an install also compiles them (~10-15 s once), into `__pycache__` next to the module."""
 
 from __future__ import annotations
 
@@ -17,6 +21,8 @@ def kernels() -> ModuleType | None:
         return None
     try:
         from scenariomax import _numba_kernels
-    except ImportError:  # numba missing, or a Python it has no build for yet
+    except (ImportError, RuntimeError, OSError):
+        # numba missing or built for another numpy; or no writable place for its cache (next to this file, else
+        # ~/.cache or NUMBA_CACHE_DIR): numba refuses to compile a cached function then
         return None
     return _numba_kernels
