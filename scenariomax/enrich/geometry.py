@@ -177,7 +177,7 @@ def project_to_polyline(points: np.ndarray, polyline: np.ndarray, segments: tupl
         segments = polyline_segments(line)
     line, ax, ay, sx, sy, seg_len2, cum = segments
     compiled = kernels()
-    if compiled is not None:  # the same bits as below, ~5x faster on the short inputs of the path search
+    if compiled is not None and len(sx):  # the same bits as below, ~5x faster on the short inputs of the path search
         dist, arc, foot = compiled.nearest_on_polyline(np.ascontiguousarray(pts), line, sx, sy, seg_len2, cum,
                                                        with_foot)
         return dist, arc, (foot if with_foot else None)
@@ -365,7 +365,7 @@ def run_cumsum(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
     if len(values) == 0:
         return out
     compiled = kernels()
-    if compiled is not None:  # the same bits, one pass
+    if compiled is not None and counts.sum() == len(values) and (counts >= 0).all():  # the same bits, one pass
         return compiled.run_cumsum(values, counts)
     if len(counts) <= _FEW_RUNS:  # one np.cumsum per run costs less than building the tables below
         begin = 0
@@ -429,10 +429,12 @@ def run_interp(x: np.ndarray, x_run: np.ndarray, xp: np.ndarray, fp: np.ndarray,
     x = np.asarray(x, np.float64)
     xp, fp = np.asarray(xp, np.float64), np.asarray(fp, np.float64)
     compiled = kernels()
-    if compiled is not None:  # the same bits, each query searched in its own run
-        out, ok = compiled.run_interp(x, np.asarray(x_run, np.int64), xp,
-                                      np.ascontiguousarray(fp.reshape(len(fp), -1)), np.asarray(counts, np.int64))
-        if ok:
+    runs, sizes = np.asarray(x_run, np.int64), np.asarray(counts, np.int64)
+    # The kernel reads without bounds checks: only runs that tile xp, and queries of those runs.
+    if (compiled is not None and len(sizes) and sizes.sum() == len(xp) == len(fp) and (sizes >= 1).all()
+            and (not len(runs) or (runs.min() >= 0 and runs.max() < len(sizes)))):
+        out, ok = compiled.run_interp(x, runs, xp, np.ascontiguousarray(fp.reshape(len(fp), -1)), sizes)
+        if ok:  # the same bits, each query searched in its own run
             return out if fp.ndim == 2 else out[:, 0]
     starts = run_starts(counts)
     last = starts + np.asarray(counts, np.int64) - 1  # (R,)

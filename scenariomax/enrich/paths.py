@@ -202,7 +202,7 @@ class _TrackNearLanes:
 
     def _project(self, lane: int) -> tuple[np.ndarray, np.ndarray]:
         compiled = kernels()
-        if compiled is not None:  # the box test and the projection in one pass, the same values
+        if compiled is not None and self.lanes.counts[lane] >= 2:  # box test and projection in one pass, same values
             line, _, _, sx, sy, seg_len2, cum = _segments(self.lanes, lane)
             dist, arc, inside = compiled.track_on_lane(self.track, self.lanes.boxes[lane], self.radius, line, sx, sy,
                                                        seg_len2, cum)
