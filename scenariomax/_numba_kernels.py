@@ -234,6 +234,20 @@ def run_cumsum(values, counts):
 
 
 @numba.njit(cache=True, nogil=True)
+def _last_at_or_below(xp, value, first, stop) -> int:
+    """The last index j in [first, stop) with xp[j] <= value, first - 1 when none (np.searchsorted(..., "right")
+    - 1 by bisection). xp non-decreasing there."""
+    lo, hi = first, stop
+    while lo < hi:
+        mid = lo + ((hi - lo) >> 1)
+        if value >= xp[mid]:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo - 1
+
+
+@numba.njit(cache=True, nogil=True)
 def _interp_into(out, i, value, xp, fp, first, n):
     """out[i, :] = np.interp(value, xp[first:first + n], fp[first:first + n, k]) for every column k, bit for bit, by
     numpy's rule (compiled_base.c) with j the last index with xp[j] <= value: a one-point xp gives fp[0]; NaN stays
@@ -253,14 +267,7 @@ def _interp_into(out, i, value, xp, fp, first, n):
     elif value >= xp[last]:
         j = last
     else:
-        lo, hi = first, last + 1  # bisection: the first index with xp > value, minus one
-        while lo < hi:
-            mid = lo + ((hi - lo) >> 1)
-            if value >= xp[mid]:
-                lo = mid + 1
-            else:
-                hi = mid
-        j = lo - 1
+        j = _last_at_or_below(xp, value, first, last + 1)
     if j == last or xp[j] == value or value < xp[j]:
         for k in range(d):
             out[i, k] = fp[j, k]
@@ -362,14 +369,7 @@ def resample_path(xyz, lane, spacing, max_points):
     for i in range(count):
         target = i * spacing  # np.arange's values from 0: i * step
         _interp_into(out, i, target, arcs, points, 0, arcs.shape[0])
-        lo, hi = 0, arcs.shape[0]  # np.searchsorted(arcs, target, "right") - 1, at least 0
-        while lo < hi:
-            mid = lo + ((hi - lo) >> 1)
-            if target >= arcs[mid]:
-                lo = mid + 1
-            else:
-                hi = mid
-        out_lane[i] = lanes[max(lo - 1, 0)]
+        out_lane[i] = lanes[max(_last_at_or_below(arcs, target, 0, arcs.shape[0]), 0)]
     return out, out_lane, True
 
 
