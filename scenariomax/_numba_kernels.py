@@ -26,18 +26,17 @@ def _box_gap2(px: float, py: float, low_x: float, low_y: float, high_x: float, h
 
 
 @numba.njit(cache=True, nogil=True)
-def _scan(px, py, line, sx, sy, seg_len2, first, stop, prune, low, high):
-    """Nearest segment of one point among segments [first, stop): (index, frac, foot x, foot y, squared distance),
-    as `geometry._feet` and `argmin` give them (segment j: from line[j] along (sx[j], sy[j])). `prune`: skip the
-    chunks of `_CHUNK` segments (boxes `low`/`high` (C, 2), chunk c holding segments first + c * _CHUNK ...) whose
-    box lies further than the best so far."""
+def _scan(px, py, line, sx, sy, seg_len2, prune, low, high):
+    """Nearest segment of one point: (index, frac, foot x, foot y, squared distance), as `geometry._feet` and
+    `argmin` give them (segment j: from line[j] along (sx[j], sy[j])). `prune`: skip the chunks of `_CHUNK` segments
+    (boxes `low`/`high` (C, 2) from `_chunk_boxes`) whose box lies further than the best so far."""
     best, best_frac, best_x, best_y, best_d2 = -1, 0.0, 0.0, 0.0, 0.0
-    j = first
+    j, stop = 0, sx.shape[0]
     while j < stop:
-        if prune and (j - first) % _CHUNK == 0 and best >= 0:
-            c = (j - first) // _CHUNK
+        if prune and j % _CHUNK == 0 and best >= 0:
             # The margin covers rounding: a skipped chunk holds no segment at or below the best (ties keep the
             # earlier index anyway, as argmin does).
+            c = j // _CHUNK
             if _box_gap2(px, py, low[c, 0], low[c, 1], high[c, 0], high[c, 1]) > best_d2 * (1.0 + 1e-9) + 1e-9:
                 j += _CHUNK
                 continue
@@ -63,15 +62,15 @@ def _scan(px, py, line, sx, sy, seg_len2, first, stop, prune, low, high):
 
 
 @numba.njit(cache=True, nogil=True)
-def _chunk_boxes(line, first, stop):
-    """Bounding boxes of the chunks of segments [first, stop) of `line` (vertices first .. stop inclusive). -> (C, 2)
-    low, (C, 2) high"""
-    num = (stop - first + _CHUNK - 1) // _CHUNK
+def _chunk_boxes(line, num_segments):
+    """Bounding boxes of the chunks of `_CHUNK` segments of `line` (chunk c: vertices c * _CHUNK .. its last
+    segment's end). -> (C, 2) low, (C, 2) high"""
+    num = (num_segments + _CHUNK - 1) // _CHUNK
     low = np.empty((num, 2))
     high = np.empty((num, 2))
     for c in range(num):
-        begin = first + c * _CHUNK
-        end = min(begin + _CHUNK, stop)  # the chunk's last vertex (its last segment's end)
+        begin = c * _CHUNK
+        end = min(begin + _CHUNK, num_segments)
         for d in range(2):
             lo = line[begin, d]
             hi = lo
@@ -92,17 +91,27 @@ def _all_finite(values) -> bool:
 
 
 @numba.njit(cache=True, nogil=True)
+def _pruning(line, num_segments, finite_points):
+    """Whether the scan of `line` may skip chunks (long, every coordinate finite) and its chunk boxes (empty
+    otherwise)."""
+    prune = num_segments >= _PRUNE_FROM and finite_points and _all_finite(line)
+    if prune:
+        low, high = _chunk_boxes(line, num_segments)
+        return True, low, high
+    return False, np.empty((0, 2)), np.empty((0, 2))
+
+
+@numba.njit(cache=True, nogil=True)
 def nearest_on_polyline(pts, line, sx, sy, seg_len2, cum, with_foot):
     """`geometry.project_to_polyline` after `polyline_segments`: distance (m,), foot arc (m,), foot (m, 2) (zeros
     unless `with_foot`). pts (m, 2), line (n >= 2, 2)."""
-    m, k = pts.shape[0], sx.shape[0]
+    m = pts.shape[0]
     dist = np.empty(m)
     arc = np.empty(m)
     foot = np.zeros((m, 2) if with_foot else (0, 2))
-    prune = k >= _PRUNE_FROM and _all_finite(pts) and _all_finite(line)
-    low, high = _chunk_boxes(line, 0, k) if prune else (np.empty((0, 2)), np.empty((0, 2)))
+    prune, low, high = _pruning(line, sx.shape[0], _all_finite(pts))
     for i in range(m):
-        best, frac, foot_x, foot_y, d2 = _scan(pts[i, 0], pts[i, 1], line, sx, sy, seg_len2, 0, k, prune, low, high)
+        best, frac, foot_x, foot_y, d2 = _scan(pts[i, 0], pts[i, 1], line, sx, sy, seg_len2, prune, low, high)
         arc[i] = cum[best] + frac * np.sqrt(seg_len2[best])
         dist[i] = np.sqrt(d2)
         if with_foot:
@@ -114,35 +123,16 @@ def nearest_on_polyline(pts, line, sx, sy, seg_len2, cum, with_foot):
 @numba.njit(cache=True, nogil=True)
 def nearest_on_polylines(pts, vertex, counts):
     """`geometry.project_to_polylines` for polylines of >= 2 vertices stored back to back (`vertex` (V, 2), vertices
-    per polyline `counts` (L,)): distance (L, m), foot arc (L, m). Segments and arc lengths as
-    `polyline_segments` builds them for each polyline."""
-    m, num_lines = pts.shape[0], counts.shape[0]
-    dist = np.empty((num_lines, m))
-    arc = np.empty((num_lines, m))
-    finite = _all_finite(pts) and _all_finite(vertex)
+    per polyline `counts` (L,)): distance (L, m), foot arc (L, m), each polyline as `nearest_on_polyline` after
+    `segment_vectors`."""
+    dist = np.empty((counts.shape[0], pts.shape[0]))
+    arc = np.empty((counts.shape[0], pts.shape[0]))
     start = 0
-    for line_index in range(num_lines):
-        n = counts[line_index]
-        line = vertex[start:start + n]
-        start += n
-        k = n - 1
-        sx = np.empty(k)
-        sy = np.empty(k)
-        seg_len2 = np.empty(k)
-        cum = np.empty(n)
-        cum[0] = 0.0
-        for j in range(k):
-            sx[j] = line[j + 1, 0] - line[j, 0]
-            sy[j] = line[j + 1, 1] - line[j, 1]
-            raw = sx[j] * sx[j] + sy[j] * sy[j]
-            cum[j + 1] = cum[j] + np.sqrt(raw)  # np.cumsum: a sequential sum
-            seg_len2[j] = 1e-12 if raw < 1e-12 else raw  # np.maximum: NaN stays NaN
-        prune = k >= _PRUNE_FROM and finite
-        low, high = _chunk_boxes(line, 0, k) if prune else (np.empty((0, 2)), np.empty((0, 2)))
-        for i in range(m):
-            best, frac, _, _, d2 = _scan(pts[i, 0], pts[i, 1], line, sx, sy, seg_len2, 0, k, prune, low, high)
-            arc[line_index, i] = cum[best] + frac * np.sqrt(seg_len2[best])
-            dist[line_index, i] = np.sqrt(d2)
+    for row in range(counts.shape[0]):
+        line = vertex[start:start + counts[row]]
+        start += counts[row]
+        sx, sy, seg_len2, cum = segment_vectors(line)
+        dist[row], arc[row], _ = nearest_on_polyline(pts, line, sx, sy, seg_len2, cum, False)
     return dist, arc
 
 
@@ -184,21 +174,19 @@ def track_on_lane(track, box, radius, line, sx, sy, seg_len2, cum):
     """`paths._TrackNearLanes._project`: distance (m,) and foot arc (m,) of the logged positions `track` (m, 2) on
     one lane, computed for the positions inside the lane's bounding box `box` (min x, min y, max x, max y) grown
     by `radius` + 1 m (inf / nan elsewhere), and how many lie inside."""
-    m, k = track.shape[0], sx.shape[0]
+    m = track.shape[0]
     dist = np.full(m, np.inf)
     arc = np.full(m, np.nan)
     low_x, low_y = box[0] - radius - 1.0, box[1] - radius - 1.0
     high_x, high_y = box[2] + radius + 1.0, box[3] + radius + 1.0
-    prune = k >= _PRUNE_FROM and _all_finite(line)
-    low, high = _chunk_boxes(line, 0, k) if prune else (np.empty((0, 2)), np.empty((0, 2)))
+    prune, low, high = _pruning(line, sx.shape[0], True)  # a position inside the (finite) box is finite
     inside = 0
     for i in range(m):
         px, py = track[i, 0], track[i, 1]
-        if not (px >= low_x and px <= high_x and py >= low_y and py <= high_y):
+        if not (px >= low_x and px <= high_x and py >= low_y and py <= high_y):  # NaN: outside
             continue
         inside += 1
-        best, frac, _, _, d2 = _scan(px, py, line, sx, sy, seg_len2, 0, k, prune and np.isfinite(px)
-                                     and np.isfinite(py), low, high)
+        best, frac, _, _, d2 = _scan(px, py, line, sx, sy, seg_len2, prune, low, high)
         arc[i] = cum[best] + frac * np.sqrt(seg_len2[best])
         dist[i] = np.sqrt(d2)
     return dist, arc, inside

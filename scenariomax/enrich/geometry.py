@@ -361,12 +361,12 @@ def run_cumsum(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
     values (n,) back to back, counts (R,) summing to n -> (n,)"""
     values = np.asarray(values, np.float64)
     counts = np.asarray(counts, np.int64)
-    out = np.empty_like(values)
-    if len(values) == 0:
-        return out
     compiled = kernels()
     if compiled is not None and counts.sum() == len(values) and (counts >= 0).all():  # the same bits, one pass
         return compiled.run_cumsum(values, counts)
+    out = np.empty_like(values)
+    if len(values) == 0:
+        return out
     if len(counts) <= _FEW_RUNS:  # one np.cumsum per run costs less than building the tables below
         begin = 0
         for count in counts.tolist():

@@ -16,14 +16,15 @@ pytest.importorskip("numba", reason="numba is not installed: the numpy code runs
 KERNELS = _compiled.kernels()
 
 
-@pytest.fixture
-def numpy_only(monkeypatch):
-    """Runs the code under test with the kernels switched off (as where numba is missing)."""
+def _without_kernels(monkeypatch, run):
+    """run() with the kernels switched off (as where numba is missing), then on again."""
     monkeypatch.setenv(_compiled.DISABLE_ENV, "1")
     _compiled.kernels.cache_clear()
-    yield
-    monkeypatch.delenv(_compiled.DISABLE_ENV)
-    _compiled.kernels.cache_clear()
+    try:
+        return run()
+    finally:
+        monkeypatch.delenv(_compiled.DISABLE_ENV)
+        _compiled.kernels.cache_clear()
 
 
 def _awkward_polyline(rng, n):
@@ -43,9 +44,9 @@ def _awkward_points(rng, line, m):
     return pts
 
 
-def test_kernels_load_and_the_switch_turns_them_off(numpy_only):
+def test_kernels_load_and_the_switch_turns_them_off(monkeypatch):
     assert KERNELS is not None
-    assert _compiled.kernels() is None
+    assert _without_kernels(monkeypatch, _compiled.kernels) is None
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -67,13 +68,7 @@ def test_polyline_segments_are_numpys(monkeypatch):
     lines = [_awkward_polyline(rng, int(rng.integers(2, 90))) for _ in range(200)]
     lines[0][3] = np.nan
     compiled = [geometry.polyline_segments(line) for line in lines]
-    monkeypatch.setenv(_compiled.DISABLE_ENV, "1")
-    _compiled.kernels.cache_clear()
-    try:
-        plain = [geometry.polyline_segments(line) for line in lines]
-    finally:
-        monkeypatch.delenv(_compiled.DISABLE_ENV)
-        _compiled.kernels.cache_clear()
+    plain = _without_kernels(monkeypatch, lambda: [geometry.polyline_segments(line) for line in lines])
     for got, want in zip(compiled, plain):
         assert len(got) == len(want) == 7
         for a, b in zip(got, want):
@@ -117,13 +112,7 @@ def test_track_near_lanes_is_numpys(monkeypatch):
     lanes = Lanes(ids=np.arange(30), types=np.ones(30, np.int64), offsets=offsets, points=np.concatenate(polylines))
     track = np.cumsum(rng.normal(size=(90, 2)), axis=0)
     compiled = [_TrackNearLanes(lanes, track, 6.0).of(lane) for lane in range(30)]
-    monkeypatch.setenv(_compiled.DISABLE_ENV, "1")
-    _compiled.kernels.cache_clear()
-    try:
-        plain = [_TrackNearLanes(lanes, track, 6.0).of(lane) for lane in range(30)]
-    finally:
-        monkeypatch.delenv(_compiled.DISABLE_ENV)
-        _compiled.kernels.cache_clear()
+    plain = _without_kernels(monkeypatch, lambda: [_TrackNearLanes(lanes, track, 6.0).of(k) for k in range(30)])
     near = sum(np.isfinite(dist).any() for dist, _ in plain)
     assert 3 <= near < 30  # lanes near the track, and far ones
     for (dist, arc), (want_dist, want_arc) in zip(compiled, plain):
@@ -206,13 +195,7 @@ def test_slices_and_resampled_paths_are_numpys(monkeypatch):
                 for line, cum, bounds, pieces, settings in cases]
 
     compiled = run()
-    monkeypatch.setenv(_compiled.DISABLE_ENV, "1")
-    _compiled.kernels.cache_clear()
-    try:
-        plain = run()
-    finally:
-        monkeypatch.delenv(_compiled.DISABLE_ENV)
-        _compiled.kernels.cache_clear()
+    plain = _without_kernels(monkeypatch, run)
     for (cut, path), (want_cut, want_path) in zip(compiled, plain):
         np.testing.assert_array_equal(cut, want_cut)
         np.testing.assert_array_equal(path.xyz, want_path.xyz)
@@ -257,12 +240,6 @@ def _records(dataset: str, relative: str) -> list[bytes]:
 ])
 def test_real_conversions_write_the_same_bytes_with_and_without_kernels(dataset, relative, monkeypatch):
     compiled = _records(dataset, relative)
-    monkeypatch.setenv(_compiled.DISABLE_ENV, "1")
-    _compiled.kernels.cache_clear()
-    try:
-        plain = _records(dataset, relative)
-    finally:
-        monkeypatch.delenv(_compiled.DISABLE_ENV)
-        _compiled.kernels.cache_clear()
+    plain = _without_kernels(monkeypatch, lambda: _records(dataset, relative))
     assert len(compiled) == len(plain) >= 1
     assert all(a == b for a, b in zip(compiled, plain))
