@@ -22,7 +22,8 @@ from scenariomax.sources.gpudrive import tracks as trk
 from scenariomax.sources.gpudrive.layout import RawScenario
 from scenariomax.sources.gpudrive.roads import light_arrays, map_polylines
 from scenariomax.sources.sanity import id_list  # lists of more than MAX_LISTED_IDS ids become a count
-from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, window_starts
+from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, window_steps
+from scenariomax.sources.womd.windows import log_window_starts as shared_log_window_starts
 
 SOURCE_NAME = "gpudrive"
 
@@ -93,20 +94,17 @@ def clean_tracks(raw: RawScenario) -> CleanTracks:
 
 
 def log_window_starts(num_steps: int, sizes: Sizes, stride: int) -> list[int]:
-    """First log step of every window. A log of at least 91 steps gives WOMD's windows (current step at log
-    step 10, then every `stride`); a shorter one with its current step (e.g. WOMD's 11-step test split) gives
-    one window padded with invalid future steps; a log without a current step gives none."""
-    if num_steps >= sizes.num_timesteps:
-        return window_starts(num_steps, sizes.num_past, sizes.num_past, sizes.num_timesteps, stride)
-    return [0] if num_steps > sizes.num_past else []
-
-
-def cut(values: np.ndarray, start: int, length: int, fill) -> np.ndarray:
-    """Steps [start, start + length) of (N, T, ...) values, padded with `fill` past the log's end."""
-    out = np.full((values.shape[0], length) + values.shape[2:], fill, dtype=values.dtype)
-    part = values[:, start:start + length]
-    out[:, :part.shape[1]] = part
-    return out
+    """First log step of every window, cut as ScenarioNet logs are (`womd.windows.log_window_starts`) with the
+    current step at log step 10 (where GPUDrive starts): a log of at least 91 steps gives WOMD's windows (then
+    every `stride`); a shorter one one window padded with invalid future steps; one shorter than the history
+    (GPUDrive's own few-step test scenes) one window whose current step is the log's last but one, the history
+    before the log invalid (a negative start). A log of one step gives none."""
+    if num_steps < 2:
+        return []
+    # log step 10 while it exists (WOMD's 11-step test split keeps it, though nothing follows it); in a shorter
+    # log one step at least follows the current step
+    current = sizes.num_past if num_steps > sizes.num_past else num_steps - 2
+    return shared_log_window_starts(num_steps, current, sizes.num_past, sizes.num_timesteps, stride)
 
 
 def stale_track_indices(raw: RawScenario) -> str | None:
@@ -138,15 +136,15 @@ def prediction_labels(raw: RawScenario, indices_trusted: bool = True) -> dict[st
 
 
 def _window_objects(tracks: CleanTracks, start: int, num_timesteps: int) -> dict[str, np.ndarray]:
-    valid = cut(tracks.valid, start, num_timesteps, False)
+    valid = window_steps(tracks.valid, start, num_timesteps, False)
 
     def field(values: np.ndarray) -> np.ndarray:
-        return np.where(valid, cut(values, start, num_timesteps, -1.0), -1.0).astype(np.float32)
+        return np.where(valid, window_steps(values, start, num_timesteps, -1.0), -1.0).astype(np.float32)
 
     def size(values: np.ndarray) -> np.ndarray:
         return np.where(valid, values[:, None], -1.0).astype(np.float32)
 
-    velocity = cut(tracks.velocity, start, num_timesteps, -1.0)
+    velocity = window_steps(tracks.velocity, start, num_timesteps, -1.0)
     return dict(x=field(tracks.x), y=field(tracks.y), z=field(tracks.z), bbox_yaw=field(tracks.yaw),
                 velocity_x=np.where(valid, velocity[..., 0], -1.0), velocity_y=np.where(valid, velocity[..., 1], -1.0),
                 length=size(tracks.boxes.length), width=size(tracks.boxes.width), height=size(tracks.boxes.height),
@@ -159,8 +157,8 @@ def scenario_windows(raw: RawScenario, sizes: Sizes,
     yielded as ScenarioError (the caller records them as Failures)."""
     starts = log_window_starts(raw.num_steps, sizes, stride)
     if not starts:
-        yield trk.ScenarioError(f"scenario {raw.scenario_id}: {raw.num_steps} steps, fewer than the "
-                                f"{sizes.num_past + 1} (history and current step) a window needs")
+        yield trk.ScenarioError(f"scenario {raw.scenario_id}: {raw.num_steps} step{'s' * (raw.num_steps != 1)}: "
+                                f"nothing follows the current step to simulate")
         return
     tracks = clean_tracks(raw)
     stale = stale_track_indices(raw)
@@ -177,8 +175,11 @@ def scenario_windows(raw: RawScenario, sizes: Sizes,
              "log_steps": raw.num_steps, **map_result.notes}
     if stale:
         notes["track_indices_ignored"] = stale
-    if raw.num_steps < sizes.num_timesteps:
-        notes["steps_padded"] = sizes.num_timesteps - raw.num_steps  # future not in the file (invalid)
+    if starts[0] < 0:  # a log shorter than the history: the steps before it are invalid
+        notes["history_padded"] = -starts[0]
+        notes["current_step_moved"] = {"log": sizes.num_past, "window": starts[0] + sizes.num_past}
+    if starts[0] + sizes.num_timesteps > raw.num_steps:
+        notes["steps_padded"] = starts[0] + sizes.num_timesteps - raw.num_steps  # future not in the file (invalid)
     for start in starts:
         window_id = raw.scenario_id if len(starts) == 1 else f"{raw.scenario_id}_t{start:03d}"
         objects = _window_objects(tracks, start, sizes.num_timesteps)
@@ -190,7 +191,7 @@ def scenario_windows(raw: RawScenario, sizes: Sizes,
         if unknown_states:
             window_notes["light_states_unknown"] = unknown_states  # not a light state name: stored as unknown
         # Prediction labels belong to the log's own current step (step 10, where GPUDrive starts).
-        window_labels = labels if start == 0 else {k: np.zeros_like(v) for k, v in labels.items()}
+        window_labels = labels if start <= 0 else {k: np.zeros_like(v) for k, v in labels.items()}
         scenario = Scenario(
             scenario_id=window_id, source_dataset=SOURCE_NAME, current_time_index=sizes.num_past,
             object_id=tracks.ids, object_type=tracks.types, is_sdc=np.arange(raw.num_objects) == sdc,

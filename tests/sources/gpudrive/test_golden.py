@@ -206,10 +206,23 @@ def test_long_logs_give_windows_with_labels_in_the_first(tmp_path):
     assert notes_of(second)["log_start_step"] == 80
 
 
-def test_too_short_log_is_a_failure(tmp_path):
-    items = convert_doc(tmp_path, scene_document("gpudrive-metadata", num_steps=8))
+def test_log_shorter_than_the_history_is_one_padded_scenario(tmp_path):
+    """GPUDrive's own test scenes log a few steps: the current step is the log's last but one, as for ScenarioNet."""
+    scenario = only_scenario(tmp_path, scene_document("gpudrive-metadata", num_steps=8))
+    sdc = scenario.sdc_index
+    # log steps 0-7 at window steps 4-11: the current step (10) is log step 6, one step follows it
+    assert scenario.valid[sdc, 4:12].all() and not scenario.valid[sdc, :4].any() and not scenario.valid[sdc, 12:].any()
+    np.testing.assert_allclose(scenario.x[sdc, 10], 6 * SDC_SPEED * 0.1, atol=1e-4)
+    notes = notes_of(scenario)
+    assert notes["history_padded"] == 4 and notes["steps_padded"] == 79 and notes["log_steps"] == 8
+    assert notes["current_step_moved"] == {"log": 10, "window": 6}
+    assert scenario.tracks_to_predict.any()  # the log's only window keeps its labels
+
+
+def test_one_step_log_is_a_failure_naming_the_cause(tmp_path):
+    items = convert_doc(tmp_path, scene_document("gpudrive-metadata", num_steps=1))
     assert len(items) == 1 and isinstance(items[0], Failure)
-    assert "8 steps" in items[0].reason and "\n" not in items[0].reason
+    assert "1 step: nothing follows the current step to simulate" in items[0].reason and "\n" not in items[0].reason
 
 
 # --- map and lights --------------------------------------------------------------------------------

@@ -143,4 +143,6 @@ def test_log_window_starts():
     assert log_window_starts(91, sizes, 80) == [0]
     assert log_window_starts(199, sizes, 80) == [0, 80]
     assert log_window_starts(11, sizes, 80) == [0]
-    assert log_window_starts(10, sizes, 80) == []
+    assert log_window_starts(10, sizes, 80) == [-2]  # current step at log step 8, the history padded
+    assert log_window_starts(2, sizes, 80) == [-10]
+    assert log_window_starts(1, sizes, 80) == []
