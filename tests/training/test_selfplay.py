@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import subprocess
 import sys
@@ -22,6 +23,7 @@ from vmax_sim.env import EnvConfig
 from vmax_sim.env.selfplay import SelfPlayConfig, SelfPlayEnv
 from vmax_sim.evaluation.modes import EvalMode
 from vmax_sim.evaluation.selfplay import SelfPlayResult, format_selfplay
+from vmax_sim.observation import ObservationConfig
 from vmax_sim.training import apply_overrides, preset_config, train
 from vmax_sim.training.config import config_from_dict, config_to_dict
 
@@ -58,6 +60,30 @@ def test_agents_are_the_sdc_then_the_controllable_ones_and_empty_slots_are_maske
     assert state.active.tolist() == [[True, True, False]] * 2
     assert jax.tree.leaves(state.observation)[0].shape[0] == 2 * K  # one learner row per (scene, agent slot)
     np.testing.assert_allclose(state.goal_xy[0, 1], [90.0, 0.0])  # the agent's last logged position
+
+
+def test_the_preset_packs_every_roadgraph_point_of_the_synthetic_maps_into_fewer_slots(synthetic_shards):
+    """ppo-selfplay gives each agent's in-box roadgraph points 96 slots instead of the observation window's 200 (the
+    encoder runs on every slot): on the synthetic maps every agent still sees every point, in the same order."""
+    preset = preset_config("ppo-selfplay")
+    assert preset.obs.num_roadgraph_points == 96
+    pool = load_batch(small_data_config(synthetic_shards, batch_size=12, num_objects=16, num_roadgraph_points=30000,
+                                        include_agent_paths=True))
+
+    def first_observation(obs_config: ObservationConfig):
+        env = SelfPlayEnv(EnvConfig(max_num_objects=16), obs_config=obs_config, selfplay=SelfPlayConfig(max_agents=8))
+        state = jax.jit(env.reset, static_argnums=1)(pool, 12, jax.random.PRNGKey(0))
+        return jax.device_get(state.observation), np.asarray(state.present).reshape(-1)
+
+    window, present = first_observation(dataclasses.replace(preset.obs, num_roadgraph_points=None))
+    packed, _ = first_observation(preset.obs)
+    assert window.roadgraph.shape[1] == 200 and packed.roadgraph.shape[1] == 96
+    assert present.sum() >= 24 and window.roadgraph_valid[present].sum(-1).max() > 48  # agents with maps in view
+    for row in np.flatnonzero(present):
+        np.testing.assert_array_equal(packed.roadgraph[row][packed.roadgraph_valid[row]],
+                                      window.roadgraph[row][window.roadgraph_valid[row]])
+    np.testing.assert_array_equal(packed.objects, window.objects)  # nothing else changes
+    np.testing.assert_array_equal(packed.path_targets, window.path_targets)
 
 
 @pytest.mark.slow  # with the next test, its rollout (~35 s) on 2 cores: kept out of the 10-minute default suite

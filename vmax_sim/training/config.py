@@ -453,14 +453,16 @@ DAGGER_OVERRIDES = (
 def selfplay_config(encoder: str | None, reward: str, algo_preset: str) -> TrainConfig:
     """The `ppo-selfplay` preset: PPO whose rows are every agent of SELFPLAY_ENVS scenes (docs/selfplay.md)."""
     algo_config, train, selfplay = get_config("ppo", algo_preset), LoopConfig(), SelfPlayConfig()
+    obs = ObservationConfig()
     if algo_preset == "default":
         algo_config = dataclasses.replace(algo_config, num_envs=SELFPLAY_ENVS, **SELFPLAY_IMITATION)
         train = LoopConfig(teacher="idm", **SELFPLAY_TEACHER)
         selfplay = SelfPlayConfig(at_goal=SELFPLAY_AT_GOAL)
+        obs = ObservationConfig(num_roadgraph_points=SELFPLAY_ROADGRAPH_POINTS)
     return TrainConfig(algo="ppo", algo_preset=algo_preset, algo_config=algo_config,
                        network=EncoderConfig(name=encoder or DEFAULT_ENCODER["ppo"]),
-                       env=EnvConfig(controlled="controllable"), reward=RewardConfig(preset=reward), train=train,
-                       selfplay=selfplay)
+                       env=EnvConfig(controlled="controllable"), obs=obs, reward=RewardConfig(preset=reward),
+                       train=train, selfplay=selfplay)
 
 
 def selfplay_off_policy_config(algo: str, encoder: str | None, reward: str) -> TrainConfig:
@@ -500,6 +502,10 @@ SELFPLAY_TEACHER = {"teacher_speed_factor": 1.4, "teacher_max_accel": 2.5, "teac
 # evaluation they must, and the students that left the scene at their goals drove on into others there (agents'
 # own collisions in 19% of held-out scenes around an IDM SDC, 7% with it; docs/selfplay.md)
 SELFPLAY_AT_GOAL = "drive_on"
+# each agent's in-box roadgraph points packed into 96 slots, not the observation window's 200 (most of them empty):
+# the encoder's MLP runs on every slot, so PPO's update is ~2.5x cheaper per agent; on the synthetic maps no agent
+# view holds more than ~90 points (median 59), so none is dropped (denser maps are thinned evenly; docs/selfplay.md)
+SELFPLAY_ROADGRAPH_POINTS = 96
 # self-play's reward preset: the penalties, with the goal and the approach to it (SelfPlayConfig) in place of the
 # navigation preset's binary progress, which paid a slow agent as much as one that reaches its goal (30 min:
 # goal-reaching 32% with navigation, 71% with safety + approach; docs/selfplay.md)
