@@ -24,6 +24,7 @@ from scenariomax.sources.gpudrive.roads import light_arrays, map_polylines
 from scenariomax.sources.sanity import id_list  # lists of more than MAX_LISTED_IDS ids become a count
 from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, window_steps
 from scenariomax.sources.womd.windows import log_window_starts as shared_log_window_starts
+from scenariomax.sources.womd.windows import window_notes as log_window_notes
 
 SOURCE_NAME = "gpudrive"
 
@@ -175,11 +176,6 @@ def scenario_windows(raw: RawScenario, sizes: Sizes,
              "log_steps": raw.num_steps, **map_result.notes}
     if stale:
         notes["track_indices_ignored"] = stale
-    if starts[0] < 0:  # a log shorter than the history: the steps before it are invalid
-        notes["history_padded"] = -starts[0]
-        notes["current_step_moved"] = {"log": sizes.num_past, "window": starts[0] + sizes.num_past}
-    if starts[0] + sizes.num_timesteps > raw.num_steps:
-        notes["steps_padded"] = starts[0] + sizes.num_timesteps - raw.num_steps  # future not in the file (invalid)
     for start in starts:
         window_id = raw.scenario_id if len(starts) == 1 else f"{raw.scenario_id}_t{start:03d}"
         objects = _window_objects(tracks, start, sizes.num_timesteps)
@@ -187,7 +183,11 @@ def scenario_windows(raw: RawScenario, sizes: Sizes,
             yield trk.ScenarioError(f"scenario {window_id}: the SDC (object {sdc}) is not valid at the current step")
             continue
         lights, unknown_states = light_arrays(raw.lights, start, sizes.num_timesteps)
-        window_notes = dict(notes, log_start_step=start) if len(starts) > 1 else dict(notes)
+        # padding outside the log, and a current step other than the log's step 10 (a log shorter than the history)
+        window_notes = dict(notes, **log_window_notes(start, raw.num_steps, sizes.num_past, sizes.num_timesteps,
+                                                      sizes.num_past))
+        if len(starts) > 1:
+            window_notes["log_start_step"] = start
         if unknown_states:
             window_notes["light_states_unknown"] = unknown_states  # not a light state name: stored as unknown
         # Prediction labels belong to the log's own current step (step 10, where GPUDrive starts).

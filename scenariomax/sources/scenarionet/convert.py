@@ -41,7 +41,13 @@ from scenariomax.sources.base import MANIFEST_NOTES
 from scenariomax.sources.sanity import STEP_SECONDS, is_nominal_10hz, swap_rows, wider_than_long
 from scenariomax.sources.scenarionet.unpickle import EnumValue
 from scenariomax.sources.womd.convert import ROAD_EDGE_TYPES, ROAD_LINE_TYPES, ScenarioBuildError
-from scenariomax.sources.womd.windows import DEFAULT_WINDOW_STRIDE, log_window_starts, window_steps, wrap_angle
+from scenariomax.sources.womd.windows import (
+    DEFAULT_WINDOW_STRIDE,
+    log_window_starts,
+    window_notes,
+    window_steps,
+    wrap_angle,
+)
 
 SOURCE_NAME = "scenarionet"
 MPH_TO_MPS, KMH_TO_MPS = 0.44704, 1.0 / 3.6
@@ -793,20 +799,6 @@ def log_current_step(meta: Mapping, times: np.ndarray, plan, num_steps_10hz: int
     return index, {}
 
 
-def window_notes(start: int, num_steps_10hz: int, sizes: Sizes, current: int) -> dict:
-    """What a window left out or moved, for the manifest: steps before the log's start or after its end
-    (invalid; the episode ends where the SDC's log does), and a current step moved to fit the history."""
-    notes = {}
-    if start < 0:
-        notes["history_padded"] = -start
-    if start + sizes.num_timesteps > num_steps_10hz:
-        notes["steps_padded"] = start + sizes.num_timesteps - num_steps_10hz
-        notes["log_steps"] = num_steps_10hz
-    if start == 0 and current < sizes.num_past:  # the log's own current step has too little history
-        notes["current_step_moved"] = {"log": current, "window": start + sizes.num_past}
-    return notes
-
-
 def no_window_reason(sdc_key, sdc_valid: np.ndarray, starts: list[int], num_past: int) -> str:
     """Why none of the windows `starts` can be simulated: the SDC is not valid at any window's current step."""
     currents = [start + num_past for start in starts]
@@ -897,7 +889,7 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str, orient_
         position, velocity = arrays["position"], arrays["velocity"]
         window_labels = labels if start + sizes.num_past == current else {
             name: np.zeros_like(value) for name, value in labels.items()}
-        notes = {**file_notes, **window_notes(start, num_steps_10hz, sizes, current)}
+        notes = {**file_notes, **window_notes(start, num_steps_10hz, sizes.num_past, length, current)}
         scenario = Scenario(
             scenario_id=scenario_id if len(all_starts) == 1 else f"{scenario_id}_t{start:03d}",
             object_id=object_ids, object_type=object_types, is_sdc=is_sdc, valid=valid,

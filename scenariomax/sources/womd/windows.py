@@ -53,3 +53,18 @@ def window_steps(values: np.ndarray, start: int, length: int, fill) -> np.ndarra
     if hi > lo:
         out[:, lo - start:hi - start] = values[:, lo:hi]
     return out
+
+
+def window_notes(start: int, num_steps: int, num_past: int, num_timesteps: int, current: int) -> dict:
+    """What a window left out or moved, for the manifest: steps before the log's start or after its end
+    (invalid; the episode ends where the SDC's log does), and the first window's current step where it is not
+    the log's own `current` (too little history before it, or a log shorter than the history)."""
+    notes = {}
+    if start < 0:
+        notes["history_padded"] = -start
+    if start + num_timesteps > num_steps:
+        notes["steps_padded"] = start + num_timesteps - num_steps
+        notes["log_steps"] = num_steps
+    if start <= 0 and start + num_past != current:
+        notes["current_step_moved"] = {"log": current, "window": start + num_past}
+    return notes
