@@ -165,7 +165,7 @@ def scenario_windows(raw: RawScenario, sizes: Sizes,
     stale = stale_track_indices(raw)
     try:
         sdc, rule = trk.choose_sdc(None if stale else raw.sdc_track_index, tracks.types, tracks.valid,
-                                   np.stack([tracks.x, tracks.y], axis=-1))
+                                   np.stack([tracks.x, tracks.y], axis=-1), raw.sdc_flagged)
     except trk.ScenarioError as error:
         yield trk.ScenarioError(f"scenario {raw.scenario_id}: {error}")
         return
@@ -173,7 +173,7 @@ def scenario_windows(raw: RawScenario, sizes: Sizes,
     roadgraph = polylines_to_roadgraph(map_result.polylines)
     labels = prediction_labels(raw, indices_trusted=stale is None)
     notes = {**tracks.notes, "sdc": {"object_index": sdc, "object_id": int(tracks.ids[sdc]), "rule": rule},
-             "log_steps": raw.num_steps, **map_result.notes}
+             "log_steps": raw.num_steps, **map_result.notes, **raw.notes}
     if stale:
         notes["track_indices_ignored"] = stale
     for start in starts:

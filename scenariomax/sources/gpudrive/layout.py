@@ -51,6 +51,13 @@ EXPECTED_SHAPE = "a JSON object with an 'objects' list and a 'roads' list (a GPU
 INDEX_FILES = ("valid_files.json", "invalid_files.json")
 # A heading in radians never exceeds this (GPUDrive wraps to [-pi, pi]; unwrapped WOMD yaws stay within 2 pi).
 MAX_RADIANS = 2 * np.pi + 1e-3
+# per-object SDC markers: ScenarioMax's `is_sdc`, Nocturne's `ev/add_av_data` branch's `is_av` (0 / 1)
+SDC_FLAGS = ("is_sdc", "is_av")
+# Waymax's `map_element_id` codes -> the road kind, for roads written without a `type`
+ELEMENT_KINDS = {**dict.fromkeys(range(0, 4), "lane"), **dict.fromkeys(range(5, 14), "road_line"),
+                 **dict.fromkeys(range(14, 17), "road_edge"), 17: "stop_sign", 18: "crosswalk", 19: "speed_bump",
+                 20: "driveway"}
+UNTYPED_ROAD = "untyped"  # a road with neither `type` nor a known `map_element_id`: skipped, counted
 MOVING_MPS = 1.0  # speed above which a box's heading and its velocity direction should agree
 MIN_MOVING_STEPS = 5  # steps needed before the velocity vote on the heading unit is trusted
 
@@ -83,6 +90,8 @@ def check_document(doc: object, path: str) -> Mapping:
             or not isinstance(doc.get("roads"), list):
         raise InputError(f"{path}: expected {EXPECTED_SHAPE}, found {_what_it_is(doc)}")
     for key in ("tl_states", "metadata"):
+        if key == "tl_states" and doc.get(key) == []:
+            continue  # no lights, as some CARLA / self-play map writers spell it
         if doc.get(key) is not None and not isinstance(doc.get(key), Mapping):
             raise InputError(f"{path}: expected '{key}' to be a JSON object, found a {type(doc[key]).__name__}")
     return doc
@@ -168,6 +177,8 @@ class RawScenario:
     sdc_track_index: int | None  # metadata.sdc_track_index
     tracks_to_predict: tuple[tuple[int, int], ...]  # (object index, difficulty) from metadata
     objects_of_interest: tuple[int, ...]  # object ids from metadata
+    sdc_flagged: tuple[int, ...] = ()  # objects marked `is_sdc` / `is_av` (ScenarioMax, a Nocturne branch)
+    notes: Mapping = dataclasses.field(default_factory=dict)  # what reading skipped, for the manifest
 
     @property
     def num_objects(self) -> int:
@@ -186,6 +197,11 @@ class _Fields:
 
     def fail(self, where: str, problem: str) -> NoReturn:
         raise InputError(f"{self.path}: {where}: {problem}")
+
+    def without_path(self, error: InputError) -> str:
+        """`<field>: <problem>` of an error `fail` raised (for a note: the manifest names the file already)."""
+        text = str(error)
+        return text[len(self.path) + 2:] if text.startswith(f"{self.path}: ") else text
 
     def mapping(self, value: object, where: str) -> Mapping:
         if not isinstance(value, Mapping):
@@ -289,20 +305,22 @@ def _object_arrays(fields: _Fields, objects: list) -> dict:
     if not objects:
         fields.fail("objects", "the list is empty (no agent to convert)")
     out = {name: [] for name in ("position", "heading", "velocity", "valid", "length", "width", "height",
-                                 "type", "id")}
+                                 "type", "id", "flagged")}
     num_steps = None
     for index, item in enumerate(objects):
         where = f"objects[{index}]"
         obj = fields.mapping(item, where)
-        for key in ("position", "heading", "velocity", "valid"):
+        for key in ("position", "heading", "valid"):
             if key not in obj:
                 fields.fail(where, f"missing '{key}'")
         series = {
             "position": fields.points(obj["position"], f"{where}.position", ("x", "y", "z")),
             "heading": fields.numbers(obj["heading"], f"{where}.heading"),
-            "velocity": fields.points(obj["velocity"], f"{where}.velocity", ("x", "y")),
             "valid": fields.flags(obj["valid"], f"{where}.valid"),
         }
+        # no velocity (GPUDrive's and PufferDrive's readers accept that): NaN, derived from the positions later
+        series["velocity"] = (fields.points(obj["velocity"], f"{where}.velocity", ("x", "y"))
+                              if obj.get("velocity") is not None else np.full((len(series["valid"]), 2), np.nan))
         lengths = {key: len(values) for key, values in series.items()}
         if len(set(lengths.values())) != 1:
             fields.fail(where, "per-step lists differ in length (" +
@@ -321,6 +339,7 @@ def _object_arrays(fields: _Fields, objects: list) -> dict:
             fields.fail(f"{where}.type", f"expected a string, found {_kind(kind)}")
         out["type"].append(kind)
         out["id"].append(fields.integer(obj["id"], f"{where}.id") if obj.get("id") is not None else None)
+        out["flagged"].append(any(obj.get(flag) in (True, 1) for flag in SDC_FLAGS))
     if num_steps == 0:
         fields.fail("objects[0]", "no steps")
     return out
@@ -332,23 +351,38 @@ def _roads(fields: _Fields, roads: list) -> tuple[RawRoad, ...]:
         where = f"roads[{index}]"
         road = fields.mapping(item, where)
         kind = road.get("type")
-        if not isinstance(kind, str):
+        if kind is not None and not isinstance(kind, str):
             fields.fail(f"{where}.type", f"expected a string, found {_kind(kind)}")
         if "geometry" not in road:
             fields.fail(where, "missing 'geometry'")
         element = road.get("map_element_id")
+        element = None if element is None else fields.integer(element, f"{where}.map_element_id")
         road_id = road.get("id")
         out.append(RawRoad(
-            kind=kind,
-            element_id=None if element is None else fields.integer(element, f"{where}.map_element_id"),
+            kind=kind if kind is not None else ELEMENT_KINDS.get(element, UNTYPED_ROAD),
+            element_id=element,
             road_id=None if road_id is None else fields.integer(road_id, f"{where}.id"),
             xyz=fields.points(road["geometry"], f"{where}.geometry", ("x", "y", "z")),
         ))
     return tuple(out)
 
 
-def _lights(fields: _Fields, tl_states: Mapping | None) -> tuple[RawLight, ...]:
-    out = []
+def _light_series(fields: _Fields, light: Mapping, name: str, where: str, count: int) -> np.ndarray | None:
+    """One per-step list of a light (x, y, z, time_index) spread over its `count` states: absent or empty -> NaN
+    (time_index: 0..count-1, as Nocturne-era files list every step), one entry -> that value at every step
+    (ScenarioMax's writers of mid-2025 wrote the stop point once per lane). None when it cannot be spread."""
+    if light.get(name) is None or light.get(name) == []:
+        return np.arange(count, dtype=np.float64) if name == "time_index" else np.full(count, np.nan)
+    values = fields.numbers(light[name], f"{where}.{name}")
+    if len(values) == 1 and name != "time_index":
+        return np.repeat(values, count)
+    return values if len(values) == count else None
+
+
+def _lights(fields: _Fields, tl_states: Mapping | None) -> tuple[tuple[RawLight, ...], dict]:
+    """The lights, and a note naming the ones whose per-step lists do not line up with their states (left out;
+    a light never fails the file)."""
+    out, unread = [], []
     for key, item in (tl_states or {}).items():
         where = f"tl_states[{key!r}]"
         try:
@@ -361,32 +395,75 @@ def _lights(fields: _Fields, tl_states: Mapping | None) -> tuple[RawLight, ...]:
             if not isinstance(state, str) and type(state) is not int:
                 fields.fail(f"{where}.state[{index}]", f"expected a state name, found {_kind(state)}")
         count = len(states)
-        coords = [fields.numbers(light[name], f"{where}.{name}") if light.get(name) is not None
-                  else np.full(count, NO_Z if name == "z" else np.nan) for name in ("x", "y", "z")]
-        steps = (fields.numbers(light["time_index"], f"{where}.time_index") if light.get("time_index") is not None
-                 else np.arange(count, dtype=np.float64))  # Nocturne-era files may list every step
-        if any(len(values) != count for values in coords + [steps]):
-            fields.fail(where, f"'state' has {count} entries but x / y / z / time_index differ")
+        series = {name: _light_series(fields, light, name, where, count) for name in ("x", "y", "z", "time_index")}
+        if any(values is None for values in series.values()):
+            unread.append(f"{lane_id} (state {count} entries, " + ", ".join(
+                f"{name} {len(light[name])}" for name, values in series.items() if values is None) + ")")
+            continue
+        steps = series["time_index"]
         if not np.all(np.isfinite(steps) & (steps == np.round(steps)) & (np.abs(steps) < 2**31)):
             fields.fail(f"{where}.time_index", "expected integer steps")
-        out.append(RawLight(lane_id, tuple(states), np.stack(coords, axis=1), steps.astype(np.int64)))
-    return tuple(sorted(out, key=lambda light: light.lane_id))
+        coords = np.stack([series["x"], series["y"], series["z"]], axis=1)
+        out.append(RawLight(lane_id, tuple(states), coords, steps.astype(np.int64)))
+    notes = {"lights_unread": id_list_text(unread)} if unread else {}
+    return tuple(sorted(out, key=lambda light: light.lane_id)), notes
 
 
-def _labels(fields: _Fields, metadata: Mapping | None) -> tuple[int | None, tuple, tuple]:
-    """(sdc_track_index, tracks_to_predict as (index, difficulty), objects_of_interest ids) from metadata."""
-    metadata = metadata or {}
-    sdc = metadata.get("sdc_track_index")
-    sdc = None if sdc is None else fields.integer(sdc, "metadata.sdc_track_index")
-    predict = []
-    for index, item in enumerate(fields.items(metadata.get("tracks_to_predict", []), "metadata.tracks_to_predict")):
+def id_list_text(items: list[str], shown: int = 5) -> str:
+    """The first `shown` items joined, and how many more."""
+    more = f" and {len(items) - shown} more" if len(items) > shown else ""
+    return "; ".join(items[:shown]) + more
+
+
+def _sdc_index(fields: _Fields, metadata: Mapping) -> tuple[int | None, dict]:
+    """metadata.sdc_track_index, or None with a note when it names no object: negative (GPUDrive's and
+    PufferDrive's readers take -1 for "no SDC"; CARLA and self-play map writers write it) or not an integer."""
+    value = metadata.get("sdc_track_index")
+    if value is None:
+        return None, {}
+    try:
+        index = fields.integer(value, "metadata.sdc_track_index")
+    except InputError as error:
+        return None, {"sdc_track_index_ignored": fields.without_path(error)}
+    if index < 0:
+        return None, {"sdc_track_index_ignored": f"{index} (no SDC named): SDC chosen by rule"}
+    return index, {}
+
+
+def _prediction_entries(fields: _Fields, value: object) -> list[tuple[int, int]]:
+    """tracks_to_predict as (track index, difficulty): GPUDrive's list of {track_index, difficulty}, or the
+    ScenarioNet metadata ScenarioMax copies unchanged ({track id: {track_index, difficulty, ...}})."""
+    entries = value.values() if isinstance(value, Mapping) else fields.items(value, "metadata.tracks_to_predict")
+    out = []
+    for index, item in enumerate(entries):
         where = f"metadata.tracks_to_predict[{index}]"
         entry = fields.mapping(item, where)
-        predict.append((fields.integer(entry.get("track_index"), f"{where}.track_index"),
-                        fields.integer(entry.get("difficulty", 0), f"{where}.difficulty")))
-    interest = tuple(fields.integer(value, f"metadata.objects_of_interest[{index}]") for index, value in
-                     enumerate(fields.items(metadata.get("objects_of_interest", []), "metadata.objects_of_interest")))
-    return sdc, tuple(predict), interest
+        out.append((fields.integer(entry.get("track_index"), f"{where}.track_index"),
+                    fields.integer(entry.get("difficulty", 0), f"{where}.difficulty")))
+    return out
+
+
+def _labels(fields: _Fields, metadata: Mapping | None) -> tuple[int | None, tuple, tuple, dict]:
+    """(sdc_track_index, tracks_to_predict as (index, difficulty), objects_of_interest ids, notes) from metadata.
+    Prediction labels never fail a file: ones that cannot be read are left out with a note."""
+    metadata = metadata or {}
+    sdc, notes = _sdc_index(fields, metadata)
+    ignored = []
+    try:
+        predict = _prediction_entries(fields, metadata.get("tracks_to_predict", []))
+    except InputError as error:
+        predict = []
+        ignored.append(fields.without_path(error))
+    interest = []
+    values = metadata.get("objects_of_interest", [])
+    for index, value in enumerate(values if isinstance(values, list) else [values]):
+        try:
+            interest.append(fields.integer(value, f"metadata.objects_of_interest[{index}]"))
+        except InputError as error:  # ScenarioNet's track keys (strings) name no object here
+            ignored.append(fields.without_path(error))
+    if ignored:
+        notes["labels_ignored"] = id_list_text(ignored, shown=3)
+    return sdc, tuple(predict), tuple(interest), notes
 
 
 def scenario_name(doc: Mapping, path: str) -> str:
@@ -404,7 +481,8 @@ def parse_document(doc: object, path: str) -> RawScenario:
     fields = _Fields(path)
     arrays = _object_arrays(fields, doc["objects"])
     ids = arrays["id"]
-    sdc, predict, interest = _labels(fields, doc.get("metadata"))
+    sdc, predict, interest, label_notes = _labels(fields, doc.get("metadata"))
+    lights, light_notes = _lights(fields, doc.get("tl_states") or None)
     return RawScenario(
         scenario_id=scenario_name(doc, path),
         layout=layout_of(doc),
@@ -418,8 +496,10 @@ def parse_document(doc: object, path: str) -> RawScenario:
         type_names=tuple(arrays["type"]),
         object_ids=None if any(i is None for i in ids) else np.array(ids, np.int64),
         roads=_roads(fields, doc["roads"]),
-        lights=_lights(fields, doc.get("tl_states")),
+        lights=lights,
         sdc_track_index=sdc,
         tracks_to_predict=predict,
         objects_of_interest=interest,
+        sdc_flagged=tuple(int(i) for i in np.flatnonzero(arrays["flagged"])),
+        notes={**label_notes, **light_notes},
     )

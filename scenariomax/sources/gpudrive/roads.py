@@ -98,7 +98,8 @@ def map_polylines(roads: tuple[RawRoad, ...]) -> MapResult:
         if rg_type is None or len(points) == 0:
             skipped[road.kind if rg_type is None else f"{road.kind} (no points)"] += 1
             continue
-        polylines.append(MapPolyline(int(feature_id), rg_type, points, closed=road.kind in POLYGON_KINDS))
+        polylines.append(MapPolyline(int(feature_id), rg_type, points,
+                                     closed=road.kind.strip().lower() in POLYGON_KINDS))
     notes: dict = {}
     if skipped:
         notes["roads_skipped"] = dict(sorted(skipped.items()))

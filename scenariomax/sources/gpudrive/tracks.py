@@ -32,7 +32,7 @@ DEFAULT_BOX = {sch.OBJECT_TYPE_VEHICLE: (4.5, 2.0, 1.6), sch.OBJECT_TYPE_PEDESTR
 OBJECT_TYPES = {"vehicle": sch.OBJECT_TYPE_VEHICLE, "pedestrian": sch.OBJECT_TYPE_PEDESTRIAN,
                 "cyclist": sch.OBJECT_TYPE_CYCLIST}  # "other", "unset" and anything else -> other
 
-SDC_NAMED, SDC_LAST_TRACK, SDC_FURTHEST = "named", "last-track", "furthest"
+SDC_NAMED, SDC_FLAGGED, SDC_LAST_TRACK, SDC_FURTHEST = "named", "flagged", "last-track", "furthest"
 
 
 class ScenarioError(ValueError):
@@ -109,18 +109,21 @@ def travel_distance(xy: np.ndarray, usable: np.ndarray) -> np.ndarray:
     return np.where(pair, np.linalg.norm(np.diff(xy, axis=1), axis=-1), 0.0).sum(axis=1)
 
 
-def choose_sdc(named: int | None, types: np.ndarray, usable: np.ndarray, xy: np.ndarray) -> tuple[int, str]:
+def choose_sdc(named: int | None, types: np.ndarray, usable: np.ndarray, xy: np.ndarray,
+               flagged: tuple[int, ...] = ()) -> tuple[int, str]:
     """(object index of the SDC, the rule that chose it). (N,), (N, T), (N, T, 2)
 
-    `named` (metadata.sdc_track_index) wins. Otherwise the recording car is a vehicle usable at every
-    step: the LAST such object when it is the last object of the file (WOMD lists the SDC's track last,
-    which all 14 WOMD samples we hold, in four formats, confirm and the converters keep), else the one
-    that travels furthest."""
+    `named` (metadata.sdc_track_index) wins; then the one object `flagged` `is_sdc` / `is_av` (several flagged
+    say nothing). Otherwise the recording car is a vehicle usable at every step: the LAST such object when it
+    is the last object of the file (WOMD lists the SDC's track last, which all 14 WOMD samples we hold, in four
+    formats, confirm and the converters keep), else the one that travels furthest."""
     num_objects = len(types)
     if named is not None:
         if not 0 <= named < num_objects:
             raise ScenarioError(f"metadata.sdc_track_index {named} is outside the {num_objects} objects")
         return named, SDC_NAMED
+    if len(flagged) == 1 and 0 <= flagged[0] < num_objects:
+        return flagged[0], SDC_FLAGGED
     candidates = (types == sch.OBJECT_TYPE_VEHICLE) & usable.all(axis=1)
     if not candidates.any():
         raise ScenarioError("no SDC named (metadata.sdc_track_index), and no vehicle is valid at every step "
