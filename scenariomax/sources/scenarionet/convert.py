@@ -20,6 +20,7 @@ import collections
 import dataclasses
 import functools
 import math
+import re
 from collections.abc import Iterator, Mapping
 from typing import Any
 
@@ -246,8 +247,11 @@ SIZE_NAMES = ("length", "width", "height")
 # that report one; its traffic cones, warning triangles (typed TRAFFIC_OBJECT) and barriers never do, and
 # ScenarioNet's PG converter places them. Their sizes from MetaDrive's own classes, (length along the heading,
 # width, height) m: a cone is a cylinder of radius 0.2, a triangle of radius 0.5, a barrier 0.3 deep and 2 across.
+# Its pedestrians and cyclists reported none either until MetaDrive 8fffccd9 (2024-12-02) gave them `get_state`:
+# MetaDrive's pedestrian is a cylinder of radius 0.35 and height 1.75, its cyclist 1.75 long, 0.4 wide, 1.75 high.
 STATIC_OBJECT_SIZES = {"TRAFFIC_CONE": (0.4, 0.4, 2.0), "TRAFFIC_OBJECT": (1.0, 1.0, 1.2),
-                       "TRAFFIC_BARRIER": (0.3, 2.0, 2.0)}
+                       "TRAFFIC_BARRIER": (0.3, 2.0, 2.0), "PEDESTRIAN": (0.7, 0.7, 1.75),
+                       "CYCLIST": (1.75, 0.4, 1.75)}
 
 
 def _raw_state(track) -> Mapping | np.ndarray | None:
@@ -452,6 +456,49 @@ def map_has_speed_limits(desc: Mapping, meta: Mapping) -> bool:
                 or source.startswith(DATASETS_WITHOUT_SPEED_LIMITS + ("nuplan",)))
 
 
+def is_nuscenes(desc: Mapping, meta: Mapping) -> bool:
+    """Whether ScenarioNet's nuScenes converter wrote the description (metadata `dataset`, or the `version`
+    prefix older writers set alone)."""
+    return any(name.lower().startswith("nuscenes") for name in (str(meta.get("dataset", "")),
+                                                                 str(desc.get("version", ""))))
+
+
+# ScenarioNet's nuScenes converter from 2024-01-18 to 2024-02-24 (1f61a4b to 69a3d7a) wrote the map centred on the
+# ego's first position and then moved it back by shifting each feature's `polygon`, or its `polyline` when it had no
+# polygon: lanes have both, so their centre lines stayed ego-centred, hundreds of metres from their own outlines.
+# Told apart per map: when its centre lines lie a median of more than RECENTRE_FAR_M from their own polygons and the
+# ego's first position brings them to a median within RECENTRE_NEAR_M (a true lane's centroids differ by ~2 m, up
+# to ~40 m on long curved lanes), every centre line written beside a polygon is moved back.
+RECENTRE_FAR_M = 100.0
+RECENTRE_NEAR_M = 10.0
+
+
+def recentred_lane_lines(features: Mapping, origin_xy: np.ndarray) -> tuple[Mapping, int]:
+    """`features` with such centre lines moved by `origin_xy` (2,), and how many were."""
+    lines: dict = {}  # key -> (points (n, >=2), centroid gap to the polygon (2,))
+    for key, feature in features.items():
+        if not isinstance(feature, Mapping) or feature.get("polygon") is None or feature.get("polyline") is None:
+            continue
+        try:
+            line, outline = _xyz(feature["polyline"]), _xyz(feature["polygon"])
+        except (TypeError, ValueError):
+            continue
+        if len(line) and len(outline):
+            lines[key] = (line, line[:, :2].mean(axis=0) - outline[:, :2].mean(axis=0))
+    if not lines:
+        return features, 0
+    gaps = np.array([gap for _, gap in lines.values()])  # (k, 2)
+    if not (np.median(np.hypot(*gaps.T)) > RECENTRE_FAR_M
+            and np.median(np.hypot(*(gaps + origin_xy).T)) < RECENTRE_NEAR_M):
+        return features, 0
+    out = dict(features)
+    for key, (line, _) in lines.items():
+        moved = line.copy()
+        moved[:, :2] += origin_xy
+        out[key] = {**features[key], "polyline": moved}
+    return out, len(lines)
+
+
 def _speed_limit(feature: Mapping) -> float:
     """A lane's speed limit in m/s (nuPlan's writer: `speed_limit_mps`; WOMD's: mph and km/h), -1 when unknown."""
     for key, scale in (("speed_limit_mps", 1.0), ("speed_limit_mph", MPH_TO_MPS), ("speed_limit_kmh", KMH_TO_MPS)):
@@ -561,7 +608,11 @@ def map_polylines(features: Mapping, ids: Mapping, speed_limits: bool = True, or
             continue  # unknown feature kinds (e.g. drivable-area polygons) are not part of the roadgraph
         if rg_type == sch.RG_SOLID_SINGLE_WHITE and str(key).startswith(DRIVABLE_OUTLINE_PREFIX):
             rg_type = sch.RG_ROAD_EDGE_BOUNDARY
-        points = _feature_points(feature, rg_type)
+        try:
+            points = _feature_points(feature, rg_type)
+        except (TypeError, ValueError):  # e.g. ragged point lists: this feature cannot be read, the map still can
+            notes["map_features_unread"] = notes.get("map_features_unread", 0) + 1
+            continue
         if len(points) == 0:
             continue
         if _is_sidewalk_outline(feature, rg_type):
@@ -782,6 +833,27 @@ def _window_times(times: np.ndarray | None, start: int, length: int, valid: np.n
     return dict(timestamp_micros=np.where(valid, micros[None, :], -1), tl_timestamp_micros=micros)
 
 
+# ScenarioNet's nuScenes converter in prediction mode (`prediction=True`, since 2023-12; the layout UniTraj reads)
+# cuts one sample of the nuScenes prediction challenge: up to 2 s of keyframes before it and 6 s after (2 Hz,
+# interpolated to 10 Hz), id "<scene>_<instance token>_<sample token>", and writes no current_time_index. The
+# challenge's samples all have their 6 s future, so the current step is the 60th before the log's last.
+PREDICTION_SAMPLE_ID = re.compile(r"_[0-9a-f]{32}_[0-9a-f]{32}$")
+PREDICTION_FUTURE_STEPS = 60
+
+
+def prediction_current_step(desc: Mapping, meta: Mapping, scenario_id: str, num_steps_10hz: int
+                            ) -> tuple[int, dict] | None:
+    """The current step of a nuScenes prediction sample written without current_time_index (see above), and its
+    note; None for any other description."""
+    if _given(meta.get("current_time_index")) or not PREDICTION_SAMPLE_ID.search(scenario_id):
+        return None
+    if not is_nuscenes(desc, meta):
+        return None
+    current = max(num_steps_10hz - 1 - PREDICTION_FUTURE_STEPS, 0)
+    return current, {"current_time_index_derived": f"{current}: a nuScenes prediction sample, "
+                                                   f"{PREDICTION_FUTURE_STEPS} steps (6 s) before the log's end"}
+
+
 def log_current_step(meta: Mapping, times: np.ndarray, plan, num_steps_10hz: int, default: int) -> tuple[int, dict]:
     """The log's current step on the 10 Hz grid, and a note when the metadata's could not be used.
     `current_time_index` counts source steps: resampled, it is the 10 Hz step nearest its time."""
@@ -850,7 +922,8 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str, orient_
     if num_steps_10hz < 2:
         raise ScenarioBuildError(f"{num_steps_10hz} step{'s' * (num_steps_10hz != 1)} at 10 Hz: nothing follows "
                                  f"the current step to simulate")
-    current, file_notes = log_current_step(meta, times, plan, num_steps_10hz, sizes.num_past)
+    derived = prediction_current_step(desc, meta, scenario_id, num_steps_10hz)
+    current, file_notes = derived or log_current_step(meta, times, plan, num_steps_10hz, sizes.num_past)
     current = min(current, num_steps_10hz - 2)  # a short log without metadata: one step follows it at least
     all_starts = log_window_starts(num_steps_10hz, current, sizes.num_past, sizes.num_timesteps, stride)
     starts = [s for s in all_starts if arrays["valid"][sdc, s + sizes.num_past]]
@@ -868,6 +941,10 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str, orient_
     is_sdc = np.arange(len(keys)) == sdc
     labels = _object_labels(meta, keys)
     features = map_features(desc)
+    if is_nuscenes(desc, meta):
+        features, num_recentred = recentred_lane_lines(features, source_arrays["position"][sdc, 0, :2])
+        if num_recentred:
+            file_notes["lane_lines_recentred"] = num_recentred
     map_ids = stable_int_ids(features)
     speed_limits = map_has_speed_limits(desc, meta)
     if not speed_limits:

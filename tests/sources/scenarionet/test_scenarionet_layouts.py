@@ -333,3 +333,81 @@ def test_lane_heights_that_follow_the_heading_are_headings(tmp_path):
     lane = scenario.roadgraph_valid & np.isin(scenario.roadgraph_type, sch.LANE_TYPES)
     assert scenario.roadgraph_xyz[lane, 2].max() == pytest.approx(10.0, abs=0.01)
     assert "lane_z_was_heading" not in scenario.metadata.get(MANIFEST_NOTES, {})
+
+
+def test_reexported_pedestrians_and_cyclists_without_a_size_get_metadrive_class_sizes(tmp_path):
+    """MetaDrive's exports before 8fffccd9 (Dec 2024) wrote no size for pedestrians and cyclists: they get
+    MetaDrive's class sizes instead of being dropped."""
+    desc = metadrive_export()
+    for key, kind, y in (("walker", "PEDESTRIAN", 4.0), ("rider", "CYCLIST", -4.0)):
+        desc["tracks"][key] = {**desc["tracks"]["cone"], "type": kind}
+        desc["tracks"][key]["state"] = {**desc["tracks"]["cone"]["state"],
+                                        "position": np.tile(np.float32([20.0, y, 0.0]), (91, 1))}
+    (scenario,) = scenarios(convert(tmp_path, desc))
+    notes = scenario.metadata[MANIFEST_NOTES]
+    assert "tracks_dropped" not in notes and {"walker", "rider"} <= set(notes["sizes_from_class"])
+    sizes = {int(scenario.object_type[i]): (round(float(scenario.length[i, 10]), 2),
+                                            round(float(scenario.width[i, 10]), 2))
+             for i in range(scenario.num_objects) if scenario.object_type[i] in (2, 3)}
+    assert sizes == {sch.OBJECT_TYPE_PEDESTRIAN: (0.7, 0.7), sch.OBJECT_TYPE_CYCLIST: (1.75, 0.4)}
+
+
+def nuscenes_prediction_sample(num_steps: int) -> dict:
+    """ScenarioNet's nuScenes converter in prediction mode: id `<scene>_<instance>_<sample>`, no
+    current_time_index, 6 s (60 steps) after the current sample; the ego at x = 2 t."""
+    desc = build_description(num_steps=num_steps, step_seconds=0.1, scenario_id="scene-0103_" + "a1" * 16 + "_"
+                             + "b2" * 16)
+    desc["metadata"]["dataset"] = "nuscenes"
+    return desc
+
+
+@pytest.mark.parametrize("num_steps, current", [(81, 20), (71, 10)])
+def test_nuscenes_prediction_sample_current_step_is_six_seconds_before_the_end(tmp_path, num_steps, current):
+    """2 s of keyframes before the sample (fewer near a scene's start) and 6 s after: the sample is log step
+    num_steps - 61 (UniTraj reads the full ones with the current step at 20). With less than 1 s of history the
+    shared window rule moves the current step to log step 10, as for any log (`current_step_moved`)."""
+    (scenario,) = scenarios(convert(tmp_path, nuscenes_prediction_sample(num_steps)))
+    sdc = scenario.sdc_index
+    np.testing.assert_allclose(scenario.x[sdc, 10], 2 * current * 0.1, atol=1e-5)
+    assert scenario.valid[sdc, 10:71].all() and not scenario.valid[:, 71:].any()  # the 6 s future, no more
+    assert scenario.metadata[MANIFEST_NOTES]["current_time_index_derived"].startswith(f"{current}: ")
+    assert scenario.tracks_to_predict.any()
+    other = nuscenes_prediction_sample(num_steps)
+    other["metadata"]["dataset"] = "toy"  # the same id from another writer: the default current step 10
+    (scenario,) = scenarios(convert(tmp_path, other))
+    np.testing.assert_allclose(scenario.x[scenario.sdc_index, 10], 2.0, atol=1e-5)
+    assert "current_time_index_derived" not in scenario.metadata.get(MANIFEST_NOTES, {})
+
+
+def test_nuscenes_lane_lines_left_ego_centred_are_moved_back(tmp_path):
+    """ScenarioNet's nuScenes writer of Jan - Feb 2024 shifted each feature's polygon back to map coordinates but
+    left the centre line of lanes (which have both) centred on the ego's first position."""
+    origin = np.array([1316.4, 1038.6])
+    desc = build_description(num_steps=91, step_seconds=0.1, scenario_id="scene-0553")
+    desc["metadata"]["dataset"] = "nuscenes"
+    desc["tracks"]["ego"]["state"]["position"][:, :2] += origin
+    for key, feature in list(desc["map_features"].items()):
+        line = np.asarray(feature.get("polyline", feature.get("polygon")), np.float64)[:, :2] + origin
+        desc["map_features"][key] = {**feature, **({"polyline": line} if "polyline" in feature else
+                                                   {"polygon": line})}
+    lane_polygon = np.array([[0.0, -2.0], [100.0, -2.0], [100.0, 2.0], [0.0, 2.0]]) + origin
+    (reference,) = scenarios(convert(tmp_path, {**desc, "map_features": {
+        **desc["map_features"], "lane-1": {**desc["map_features"]["lane-1"], "polygon": lane_polygon}}}))
+    centred = np.asarray(desc["map_features"]["lane-1"]["polyline"]) - origin  # the writer's bug
+    buggy = {**desc, "map_features": {**desc["map_features"],
+                                      "lane-1": {**desc["map_features"]["lane-1"], "polyline": centred,
+                                                 "polygon": lane_polygon}}}
+    (scenario,) = scenarios(convert(tmp_path, buggy))
+    assert scenario.metadata[MANIFEST_NOTES]["lane_lines_recentred"] == 1
+    np.testing.assert_array_equal(scenario.roadgraph_xyz, reference.roadgraph_xyz)
+    assert "lane_lines_recentred" not in reference.metadata.get(MANIFEST_NOTES, {})
+
+
+def test_a_map_feature_that_cannot_be_read_is_counted_not_fatal(tmp_path):
+    desc = build_description(num_steps=91, step_seconds=0.1)
+    ragged = np.empty(2, dtype=object)
+    ragged[0], ragged[1] = [0.0, 1.0], [2.0, 3.0, 4.0, 5.0]
+    desc["map_features"]["lane-3"] = {"type": "LANE_SURFACE_STREET", "polyline": ragged}
+    (scenario,) = scenarios(convert(tmp_path, desc))
+    assert scenario.metadata[MANIFEST_NOTES]["map_features_unread"] == 1
+    assert (scenario.roadgraph_valid & (scenario.roadgraph_type == sch.RG_LANE_SURFACE_STREET)).any()
