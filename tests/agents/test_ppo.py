@@ -130,6 +130,66 @@ def test_masked_rows_do_not_change_the_update(setup):
     assert float(metrics["value_loss"]) == float(metrics_garbage["value_loss"])
 
 
+def _active_learner(size: int = 8):
+    import dataclasses
+
+    return make_learner("ppo", dataclasses.replace(CONFIG, active_minibatch_size=size), lambda: toy.ToyEncoder(8),
+                        toy.ACTION_DIM)
+
+
+def _adam_steps(train_state) -> int:
+    import optax
+
+    return int(optax.tree_utils.tree_get(train_state.opt_state, "count"))
+
+
+def _first_rows(rollout, num_active: int) -> jax.Array:
+    """(T, B) mask with the first `num_active` transitions of the flattened rollout active."""
+    shape = rollout.reward.shape
+    return (jnp.arange(shape[0] * shape[1]) < num_active).astype(jnp.float32).reshape(shape)
+
+
+def test_active_minibatches_take_as_many_steps_as_the_acting_rows_fill(setup):
+    """active_minibatch_size=N: each epoch takes ceil(active rows / N) gradient steps (CONFIG: 2 epochs), whatever
+    the rollout's size; a rollout with no acting row leaves the parameters as they were."""
+    _, state, rollout = setup  # T * B = 48 rows
+    learner = _active_learner(8)
+    update = jax.jit(learner.update)
+    bootstrap = learner.value(state.params, jax.tree.map(lambda x: x[-1], rollout.next_obs))
+    for num_active, steps in ((48, 12), (24, 6), (25, 8), (1, 2)):
+        after, metrics = update(state, rollout.replace(mask=_first_rows(rollout, num_active)), jax.random.key(3),
+                                bootstrap_value=bootstrap)
+        assert _adam_steps(after) == steps, num_active
+        assert all(bool(jnp.isfinite(m)) for m in metrics.values())
+    idle, metrics = update(state, rollout.replace(mask=_first_rows(rollout, 0)), jax.random.key(3),
+                           bootstrap_value=bootstrap)
+    assert _adam_steps(idle) == 0
+    toy.assert_trees_equal(idle.params, state.params)
+    assert all(bool(jnp.isfinite(m)) for m in metrics.values())
+
+
+def test_active_minibatches_never_read_the_empty_slots(setup):
+    """The rows with mask 0 are left out of the minibatches, not weighed out: even NaN observations there (which
+    the masked minibatches turn into NaN parameters, 0 * NaN) leave the update of the acting rows unchanged."""
+    _, state, rollout = setup
+    learner = _active_learner(8)
+    update = jax.jit(learner.update)
+    bootstrap = learner.value(state.params, jax.tree.map(lambda x: x[-1], rollout.next_obs))
+    mask = (jnp.arange(rollout.reward.shape[1]) % 2 == 0).astype(jnp.float32)[None].repeat(rollout.reward.shape[0], 0)
+    masked = rollout.replace(mask=mask)
+    poisoned = masked.replace(
+        obs=jax.tree.map(lambda x: jnp.where(mask.reshape(mask.shape + (1,) * (x.ndim - 2)) > 0, x, jnp.nan),
+                         rollout.obs),
+        reward=jnp.where(mask > 0, rollout.reward, 1e3), action=jnp.where(mask[..., None] > 0, rollout.action, -0.99))
+    first, _ = update(state, masked, jax.random.key(3), bootstrap_value=bootstrap)
+    second, _ = update(state, poisoned, jax.random.key(3), bootstrap_value=bootstrap)
+    toy.assert_trees_equal(first.params, second.params)
+    assert all(bool(jnp.all(jnp.isfinite(leaf))) for leaf in jax.tree.leaves(second.params))
+    weighed, _ = jax.jit(make_learner("ppo", CONFIG, lambda: toy.ToyEncoder(8), toy.ACTION_DIM).update)(
+        state, poisoned, jax.random.key(3), bootstrap_value=bootstrap)
+    assert not all(bool(jnp.all(jnp.isfinite(leaf))) for leaf in jax.tree.leaves(weighed.params))
+
+
 def test_the_imitation_term_pulls_the_policy_mode_to_the_teacher_label(setup):
     """With imitation_coef > 0 each update also fits mode(pi(s)) to the label in Transition.expert_action (the
     rule teacher of self-play): a few updates on the same rollout bring the mode closer to it; masked rows count
@@ -217,8 +277,10 @@ def test_update_rejects_a_rollout_that_does_not_split_into_minibatches(setup):
         learner.update(state, odd, jax.random.key(0))
 
 
-def test_ppo_learns_the_toy_task():
-    config = get_config("ppo", "debug", gamma=GAMMA, learning_rate=3e-4, num_minibatches=4, num_epochs=4)
+@pytest.mark.parametrize("active_minibatch_size", [0, 128])
+def test_ppo_learns_the_toy_task(active_minibatch_size):
+    config = get_config("ppo", "debug", gamma=GAMMA, learning_rate=3e-4, num_minibatches=4, num_epochs=4,
+                        active_minibatch_size=active_minibatch_size)
     learner = make_learner("ppo", config, lambda: toy.ToyEncoder(32), toy.ACTION_DIM)
     state, metrics = toy.train_on_policy(learner, jax.random.key(0), num_envs=32, unroll_length=16,
                                          num_updates=200, pass_bootstrap=False)

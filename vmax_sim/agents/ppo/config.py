@@ -57,6 +57,10 @@ class PPOConfig:
     # PPO ratio needs the behaviour policy). Self-play's goal-reaching swung by 15-30 points between checkpoints
     # 20k env steps apart (docs/selfplay.md)
     ema_decay: float = 0.0
+    # 0: each epoch splits every rollout row into `num_minibatches` minibatches, rows with mask 0 (self-play's empty
+    # or finished agent slots) weighed out of the losses; N > 0: each epoch steps through the mask-1 rows only, N at
+    # a time (ceil(active / N) steps), so the gradient work follows the agents that acted, not the slots
+    active_minibatch_size: int = 0
     # networks (separate policy and value networks, each with its own encoder)
     policy_hidden_sizes: tuple[int, ...] = (256, 64, 32)
     value_hidden_sizes: tuple[int, ...] = (256, 64, 32)
@@ -74,6 +78,8 @@ class PPOConfig:
         check_unit_interval(self, "gamma", "gae_lambda")
         if self.imitation_coef < 0:
             raise ValueError(f"imitation_coef must be >= 0, got {self.imitation_coef}")
+        if self.active_minibatch_size < 0:
+            raise ValueError(f"active_minibatch_size must be >= 0, got {self.active_minibatch_size}")
         if not 0.0 <= self.ema_decay < 1.0:
             raise ValueError(f"ema_decay must be in [0, 1), got {self.ema_decay}")
         if self.imitation_loss not in IMITATION_LOSSES:

@@ -3,7 +3,9 @@
 `update(state, rollout, key, bootstrap_value=None)` takes a rollout Transition with leading (T, B) dims
 collected with the current policy (its log_prob and value fields filled by `act_with_info`), computes
 GAE once with the behaviour values, then runs `num_epochs` epochs of `num_minibatches` shuffled
-minibatch steps, all inside one `lax.scan` over epochs of a `lax.scan` over minibatches.
+minibatch steps, all inside one `lax.scan` over epochs of a `lax.scan` over minibatches; with
+`active_minibatch_size` N the epochs step through the rows with mask 1 only, N at a time (a `fori_loop` of
+ceil(active / N) steps), so self-play's empty agent slots cost no gradient work.
 """
 
 from __future__ import annotations
@@ -71,11 +73,42 @@ def make_learner(config: PPOConfig, encoder_factory: EncoderFactory, action_dim:
         params, opt_state = apply_gradients(optimizer, grads, opt_state, params)
         return (params, opt_state), {**metrics, "grad_norm": scalar(global_norm(grads))}
 
+    def active_epochs(carry, data: ppo_losses.PPOBatch, epoch_keys: jax.Array):
+        """`num_epochs` passes over the rows with mask 1 only, `active_minibatch_size` of them per gradient step:
+        ceil(active / size) steps per epoch, the last one filled up with active rows drawn again. Self-play's
+        empty and finished agent slots (most rows) then cost no gradient work. -> (carry, metrics averaged over
+        the steps taken; zeros when no row is active)"""
+        size = config.active_minibatch_size
+        num_rows = data.mask.shape[0]
+        active = data.mask > 0  # (N,)
+        num_active = jnp.sum(active.astype(jnp.int32))
+        steps_per_epoch = (num_active + size - 1) // size
+        metrics_shape = jax.eval_shape(sgd_step, carry, (jax.tree.map(lambda x: x[:size], data), epoch_keys[0]))[1]
+        zeros = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), metrics_shape)
+
+        def epoch(scan_carry, epoch_key):
+            perm_key, loss_key = jax.random.split(epoch_key)
+            # the active rows first, in random order (an inactive row's key is >= 1)
+            order = jnp.argsort(jax.random.uniform(perm_key, (num_rows,)) + (~active).astype(jnp.float32))
+
+            def step(i, loop_carry):
+                params_and_opt, sums = loop_carry
+                rows = order[(i * size + jnp.arange(size)) % jnp.maximum(num_active, 1)]
+                batch = jax.tree.map(lambda x: x[rows], data)
+                params_and_opt, step_metrics = sgd_step(params_and_opt, (batch, jax.random.fold_in(loss_key, i)))
+                return params_and_opt, jax.tree.map(jnp.add, sums, step_metrics)
+
+            return jax.lax.fori_loop(0, steps_per_epoch, step, scan_carry), None
+
+        (carry, sums), _ = jax.lax.scan(epoch, (carry, zeros), epoch_keys)
+        taken = jnp.maximum(steps_per_epoch * len(epoch_keys), 1).astype(jnp.float32)
+        return carry, jax.tree.map(lambda total: total / taken, sums)
+
     def update(state: PPOTrainState, rollout: Transition, key: jax.Array,
                bootstrap_value: jax.Array | None = None) -> tuple[PPOTrainState, Metrics]:
         num_steps, num_envs = rollout.reward.shape
         num_samples = num_steps * num_envs
-        if num_samples % config.num_minibatches:
+        if num_samples % config.num_minibatches and not config.active_minibatch_size:
             raise ValueError(f"a rollout of T * B = {num_steps} * {num_envs} transitions does not split into "
                              f"{config.num_minibatches} minibatches")
         minibatch_size = num_samples // config.num_minibatches
@@ -94,9 +127,12 @@ def make_learner(config: PPOConfig, encoder_factory: EncoderFactory, action_dim:
             keys = jax.random.split(loss_key, config.num_minibatches)
             return jax.lax.scan(sgd_step, carry, (shuffled, keys))
 
-        (params, opt_state), metrics = jax.lax.scan(epoch, (state.params, state.opt_state),
-                                                    jax.random.split(key, config.num_epochs))
-        metrics = jax.tree.map(jnp.mean, metrics)  # over epochs and minibatches
+        epoch_keys = jax.random.split(key, config.num_epochs)
+        if config.active_minibatch_size:
+            (params, opt_state), metrics = active_epochs((state.params, state.opt_state), data, epoch_keys)
+        else:
+            (params, opt_state), metrics = jax.lax.scan(epoch, (state.params, state.opt_state), epoch_keys)
+            metrics = jax.tree.map(jnp.mean, metrics)  # over epochs and minibatches
         mask = rollout.mask
         return_mean = ppo_losses.masked_mean(returns, mask)
         residual = returns - rollout.value
