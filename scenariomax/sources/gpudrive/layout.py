@@ -482,7 +482,7 @@ def parse_document(doc: object, path: str) -> RawScenario:
     arrays = _object_arrays(fields, doc["objects"])
     ids = arrays["id"]
     sdc, predict, interest, label_notes = _labels(fields, doc.get("metadata"))
-    lights, light_notes = _lights(fields, doc.get("tl_states") or None)
+    lights, light_notes = _lights(fields, doc.get("tl_states"))
     return RawScenario(
         scenario_id=scenario_name(doc, path),
         layout=layout_of(doc),

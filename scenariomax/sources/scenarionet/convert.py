@@ -450,17 +450,16 @@ def map_has_speed_limits(desc: Mapping, meta: Mapping) -> bool:
     `version` prefix that older writers set alone, e.g. "nuscenesv1.0-mini"). MetaDrive's re-exports of a
     scene (`dataset` "metadrive", the source's metadata under `history_metadata`) write 100 km/h on every lane
     that had no km/h or mph value: every nuScenes, AV2 and nuPlan lane (whose m/s values it does not read)."""
-    names = (str(meta.get("dataset", "")), str(desc.get("version", "")))
     source = str(as_mapping(meta.get("history_metadata")).get("dataset", "")).lower()
-    return not (any(name.lower().startswith(DATASETS_WITHOUT_SPEED_LIMITS) for name in names)
+    return not (written_by(desc, meta, DATASETS_WITHOUT_SPEED_LIMITS)
                 or source.startswith(DATASETS_WITHOUT_SPEED_LIMITS + ("nuplan",)))
 
 
-def is_nuscenes(desc: Mapping, meta: Mapping) -> bool:
-    """Whether ScenarioNet's nuScenes converter wrote the description (metadata `dataset`, or the `version`
-    prefix older writers set alone)."""
-    return any(name.lower().startswith("nuscenes") for name in (str(meta.get("dataset", "")),
-                                                                 str(desc.get("version", ""))))
+def written_by(desc: Mapping, meta: Mapping, datasets: tuple[str, ...]) -> bool:
+    """Whether the description names one of `datasets` as its source: metadata `dataset`, or the `version` prefix
+    older writers set alone (e.g. "nuscenesv1.0-mini")."""
+    return any(name.lower().startswith(datasets) for name in (str(meta.get("dataset", "")),
+                                                               str(desc.get("version", ""))))
 
 
 # ScenarioNet's nuScenes converter from 2024-01-18 to 2024-02-24 (1f61a4b to 69a3d7a) wrote the map centred on the
@@ -847,7 +846,7 @@ def prediction_current_step(desc: Mapping, meta: Mapping, scenario_id: str, num_
     note; None for any other description."""
     if _given(meta.get("current_time_index")) or not PREDICTION_SAMPLE_ID.search(scenario_id):
         return None
-    if not is_nuscenes(desc, meta):
+    if not written_by(desc, meta, ("nuscenes",)):
         return None
     current = max(num_steps_10hz - 1 - PREDICTION_FUTURE_STEPS, 0)
     return current, {"current_time_index_derived": f"{current}: a nuScenes prediction sample, "
@@ -941,7 +940,7 @@ def _windows(desc: Mapping, sizes: Sizes, stride: int, scenario_id: str, orient_
     is_sdc = np.arange(len(keys)) == sdc
     labels = _object_labels(meta, keys)
     features = map_features(desc)
-    if is_nuscenes(desc, meta):
+    if written_by(desc, meta, ("nuscenes",)):
         features, num_recentred = recentred_lane_lines(features, source_arrays["position"][sdc, 0, :2])
         if num_recentred:
             file_notes["lane_lines_recentred"] = num_recentred
